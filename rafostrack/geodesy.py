@@ -1,0 +1,76 @@
+"""Distances and local displacements on the WGS84 ellipsoid, vectorised over arrays.
+
+Ranges use the Andoyer-Lambert formula: a closed form with no iteration, within a few
+metres of the exact geodesic over the few thousand kilometres of an acoustic array
+(about 4x faster than iterating Vincenty's formulae). A sphere would be off by up to
+~4 km at 1000 km, more than the arrival-time noise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+WGS84_A_M = 6378137.0
+WGS84_F = 1.0 / 298.257223563
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+
+
+def range_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) -> NDArray:
+    """Geodesic distance (m) between points given in degrees; inputs broadcast.
+
+    Andoyer-Lambert: with reduced latitudes beta_k = atan((1 - f) tan phi_k), central angle
+    sigma between (beta_1, lambda_1) and (beta_2, lambda_2) on the auxiliary sphere,
+    P = (beta_1 + beta_2)/2 and Q = (beta_2 - beta_1)/2,
+        X = (sigma - sin sigma) sin^2 P cos^2 Q / cos^2(sigma/2)
+        Y = (sigma + sin sigma) cos^2 P sin^2 Q / sin^2(sigma/2)
+        s = a (sigma - f/2 (X + Y)).
+    Error O(f^2): under 5 m up to 3000 km (tests/test_geodesy.py checks it against
+    GeographicLib).
+    """
+    f = WGS84_F
+    lat1, lon1, lat2, lon2 = (np.radians(np.asarray(v, dtype=float)) for v in (lat1, lon1, lat2, lon2))
+    b1 = np.arctan((1.0 - f) * np.tan(lat1))
+    b2 = np.arctan((1.0 - f) * np.tan(lat2))
+    # Haversine for the central angle: well conditioned at short range.
+    h = np.sin((b2 - b1) / 2.0) ** 2 + np.cos(b1) * np.cos(b2) * np.sin((lon2 - lon1) / 2.0) ** 2
+    sigma = 2.0 * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
+    p = (b1 + b2) / 2.0
+    q = (b2 - b1) / 2.0
+    sin_sigma = np.sin(sigma)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        x = (sigma - sin_sigma) * (np.sin(p) * np.cos(q)) ** 2 / np.cos(sigma / 2.0) ** 2
+        y = (sigma + sin_sigma) * (np.cos(p) * np.sin(q)) ** 2 / np.sin(sigma / 2.0) ** 2
+        dist = WGS84_A_M * (sigma - f / 2.0 * (x + y))
+    # Coincident points make Y 0/0; their distance is 0.
+    return np.where(sigma > 0.0, dist, 0.0)
+
+
+def radii_of_curvature_m(lat_deg: ArrayLike) -> tuple[NDArray, NDArray]:
+    """Meridional (M) and prime-vertical (N) radii of curvature at geodetic latitude."""
+    s2 = np.sin(np.radians(np.asarray(lat_deg, dtype=float))) ** 2
+    w = np.sqrt(1.0 - WGS84_E2 * s2)
+    m = WGS84_A_M * (1.0 - WGS84_E2) / w**3
+    n = WGS84_A_M / w
+    return m, n
+
+
+def displace(lat_deg: NDArray, lon_deg: NDArray, east_km: NDArray, north_km: NDArray) -> tuple[NDArray, NDArray]:
+    """Move points by small east/north displacements (km) in the local tangent plane."""
+    m, n = radii_of_curvature_m(lat_deg)
+    lat = lat_deg + np.degrees(north_km * 1e3 / m)
+    lon = lon_deg + np.degrees(east_km * 1e3 / (n * np.cos(np.radians(lat_deg))))
+    return lat, wrap_lon(lon)
+
+
+def local_offsets_km(lat_deg: NDArray, lon_deg: NDArray, lat0: float, lon0: float) -> tuple[NDArray, NDArray]:
+    """East/north offsets (km) of points from (lat0, lon0) in its tangent plane."""
+    m, n = radii_of_curvature_m(lat0)
+    east = np.radians(wrap_lon(np.asarray(lon_deg) - lon0)) * n * np.cos(np.radians(lat0)) / 1e3
+    north = np.radians(np.asarray(lat_deg) - lat0) * m / 1e3
+    return east, north
+
+
+def wrap_lon(lon_deg: ArrayLike) -> NDArray:
+    """Longitude wrapped to [-180, 180)."""
+    return (np.asarray(lon_deg) + 180.0) % 360.0 - 180.0

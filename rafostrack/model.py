@@ -1,0 +1,170 @@
+"""Measurement model: predicted arrivals and the association factors of one window.
+
+For a float at X and time t, beacon i's signal arrives (paper section 2, with clock terms)
+    mu_i(X, t) = offset_i + drift_i * days_i(t) + range(X, b_i) / c + clock(t),
+with a TOA error density f (Gaussian with sd sigma, optionally mixed with an
+exponentially delayed copy for multipath). The float stores the first r signals in its
+window [0, W]; clutter is a Poisson process of rate lambda per window, uniform on [0, W].
+
+With K stored TOAs T_1 < ... < T_K the likelihood is a sum over partial matchings M of
+beacons to signals (paper eqs. 14-17):
+    p(T | X) = Lambda^K e^{-Lambda h}
+               * sum_M  prod_{(i,j) in M} w_ij  prod_{i unmatched} u_i,
+    w_ij = Pd_i f(T_j - mu_i) / Lambda          (eq. 14 "matched" over eq. 15 clutter)
+    u_i  = 1 - Pd_i + Pd_i P(t_i outside [0, h]) (eq. 14 "missing" + "late")
+with Lambda = lambda / W the clutter intensity and h the horizon: h = T_K when the window
+is full (K = r: anything later could not have been stored), h = W otherwise. The
+`unranked` baseline (eq. 19) drops the ranking: u_i = 1 - Pd_i.
+
+Arrays are shaped (particles, beacons, signals) = (P, s, K).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import log_ndtr, ndtr
+
+from .config import ModelConfig
+from .geodesy import range_m
+from .inputs import BeaconTable, FloatInfo
+
+SECONDS_PER_DAY = 86400.0
+LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
+
+
+@dataclass(frozen=True)
+class AssociationFactors:
+    """Factors of one window, per particle: sum over matchings gives the likelihood."""
+
+    log_match: NDArray[np.float64]  # (P, s, K): log w_ij
+    log_unheard: NDArray[np.float64]  # (P, s): log u_i
+    log_base: float  # K log Lambda - Lambda h, shared by all particles
+
+
+@dataclass(frozen=True)
+class WindowBeacons:
+    """The beacons transmitting during one window and their arrival delay terms."""
+
+    index: NDArray[np.intp]  # rows of the beacon table
+    lat: NDArray[np.float64]
+    lon: NDArray[np.float64]
+    delay_s: NDArray[np.float64]  # offset + drift * days + float clock offset
+
+
+def window_beacons(beacons: BeaconTable, info: FloatInfo, time: np.datetime64) -> WindowBeacons:
+    """Active beacons at `time` with the range-independent part of their arrival time.
+
+    Source clock drift accrues from the beacon's `start` date, or from the float's launch
+    when the beacon has none; the float clock offset is interpolated linearly in time.
+    """
+    index = np.flatnonzero(beacons.active_at(time))
+    epoch = np.where(np.isnat(beacons.start[index]), info.launch_time, beacons.start[index])
+    days = (time - epoch) / np.timedelta64(1, "s") / SECONDS_PER_DAY
+    delay = beacons.offset_s[index] + beacons.drift_s_per_day[index] * days + info.clock_offset_s(time)
+    return WindowBeacons(index, beacons.lat[index], beacons.lon[index], delay)
+
+
+def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np.float64]:
+    """Ranges (P, s) from particle positions to the window's beacons."""
+    return range_m(lat[:, None], lon[:, None], wb.lat[None, :], wb.lon[None, :])
+
+
+def predicted_toa_s(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
+    """Predicted arrival times mu_i = delay_i + range_i / c, shape (P, s)."""
+    return wb.delay_s[None, :] + ranges_m / model.sound_speed_m_s
+
+
+def detection_prob(ranges_m: NDArray, model: ModelConfig) -> NDArray[np.float64]:
+    """Pd as a function of range: p_detect, times a logistic fall-off when range-limited."""
+    if model.detection_range_km <= 0:
+        return np.full(ranges_m.shape, model.p_detect)
+    z = (ranges_m / 1e3 - model.detection_range_km) / model.detection_falloff_km
+    return model.p_detect * 0.5 * (1.0 - np.tanh(0.5 * z))  # p / (1 + e^z), overflow-free
+
+
+def toa_logpdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
+    """log f(r) for the TOA error r = T - mu.
+
+    f = (1 - eps) N(r; 0, sigma^2) + eps EMG(r; sigma, tau), where the exponentially
+    modified Gaussian (Gaussian plus an Exp(mean tau) multipath delay) has
+    log EMG(r) = -log tau + sigma^2 / (2 tau^2) - r / tau + log Phi(r / sigma - sigma / tau).
+    """
+    sigma = model.toa_sigma_s
+    z = resid_s / sigma
+    log_gauss = -0.5 * z * z - np.log(sigma) - LOG_SQRT_2PI
+    eps = model.multipath_fraction
+    if eps == 0.0:
+        return log_gauss
+    tau = model.multipath_delay_s
+    log_emg = -np.log(tau) + sigma**2 / (2 * tau**2) - resid_s / tau + log_ndtr(z - sigma / tau)
+    return np.logaddexp(np.log1p(-eps) + log_gauss, np.log(eps) + log_emg)
+
+
+def toa_cdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
+    """F(r) = P(T - mu <= r) for the density of `toa_logpdf`.
+
+    EMG: F(r) = Phi(r / sigma) - exp(sigma^2 / (2 tau^2) - r / tau) Phi(r / sigma - sigma / tau).
+    """
+    sigma = model.toa_sigma_s
+    z = resid_s / sigma
+    gauss = ndtr(z)
+    eps = model.multipath_fraction
+    if eps == 0.0:
+        return gauss
+    tau = model.multipath_delay_s
+    tail = np.exp(sigma**2 / (2 * tau**2) - resid_s / tau + log_ndtr(z - sigma / tau))
+    return (1 - eps) * gauss + eps * (gauss - tail)
+
+
+def clutter_intensity(model: ModelConfig, window_s: float) -> float:
+    """Lambda = lambda / W: clutter signals per second of window."""
+    return model.clutter_rate / window_s
+
+
+def horizon_s(toa_s: NDArray, max_signals: int, window_s: float) -> float:
+    """Time after which an unstored signal may lie: last TOA if full, else window end."""
+    return float(toa_s[-1]) if len(toa_s) >= max_signals else window_s
+
+
+def association_factors(
+    mu_s: NDArray,
+    p_detect: NDArray,
+    toa_s: NDArray,
+    *,
+    max_signals: int,
+    window_s: float,
+    model: ModelConfig,
+    ranked: bool = True,
+) -> AssociationFactors:
+    """The window's factors w_ij, u_i and the shared term (see module docstring).
+
+    `ranked=False` gives the unranked baseline of eq. (19): an unheard beacon costs
+    1 - Pd whatever its predicted arrival.
+    """
+    lam = clutter_intensity(model, window_s)
+    h = horizon_s(toa_s, max_signals, window_s)
+    resid = toa_s[None, None, :] - mu_s[:, :, None]
+    log_match = np.log(p_detect)[:, :, None] + toa_logpdf(resid, model) - np.log(lam)
+    if ranked:
+        p_in = toa_cdf(h - mu_s, model) - toa_cdf(-mu_s, model)
+        log_unheard = np.log1p(-p_detect * np.clip(p_in, 0.0, 1.0))
+    else:
+        log_unheard = np.log1p(-p_detect)
+    k = len(toa_s)
+    return AssociationFactors(log_match, log_unheard, k * np.log(lam) - lam * h)
+
+
+def labeled_loglik(mu_s: NDArray, toa_s: NDArray, label_index: NDArray, model: ModelConfig) -> NDArray:
+    """Hand-labelled likelihood (eq. 20): prod over labelled TOAs of f(T_j - mu_{R_j}).
+
+    `label_index[j]` is the column of `mu_s` of the TOA's beacon, or -1 for clutter,
+    which contributes nothing.
+    """
+    used = label_index >= 0
+    if not used.any():
+        return np.zeros(mu_s.shape[0])
+    resid = toa_s[used][None, :] - mu_s[:, label_index[used]]
+    return toa_logpdf(resid, model).sum(axis=1)
