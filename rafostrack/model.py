@@ -168,3 +168,23 @@ def labeled_loglik(mu_s: NDArray, toa_s: NDArray, label_index: NDArray, model: M
         return np.zeros(mu_s.shape[0])
     resid = toa_s[used][None, :] - mu_s[:, label_index[used]]
     return toa_logpdf(resid, model).sum(axis=1)
+
+
+def predicted_arrivals(
+    times: NDArray[np.datetime64],
+    lat: NDArray,
+    lon: NDArray,
+    beacons: BeaconTable,
+    info: FloatInfo,
+    model: ModelConfig,
+) -> NDArray[np.float64]:
+    """Predicted TOA (s) of every beacon along a track, shape (len(times), n_beacons).
+
+    NaN where the beacon is not active at that time.
+    """
+    out = np.full((len(times), len(beacons)), np.nan)
+    for k, t in enumerate(times):
+        wb = window_beacons(beacons, info, t)
+        ranges = beacon_ranges_m(np.atleast_1d(lat[k]), np.atleast_1d(lon[k]), wb)
+        out[k, wb.index] = predicted_toa_s(ranges, wb, model)[0]
+    return out
