@@ -151,9 +151,7 @@ def merge_layer(
             raise InputError(f"{source}: [{section}] must be a table of keys")
         for key, value in values.items():
             if key not in base[section]:
-                raise InputError(
-                    f"{source}: unknown key [{section}] {key}{nearest(key, base[section])}"
-                )
+                raise InputError(f"{source}: unknown key [{section}] {key}{nearest(key, base[section])}")
             merged[section][key] = _check_value(section, key, value, base[section][key], source)
     return merged
 

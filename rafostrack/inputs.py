@@ -136,7 +136,13 @@ def _line(row: int) -> int:
 
 
 def parse_float_column(
-    path: Path, frame: pd.DataFrame, col: str, *, default: float | None = None, lo: float = -np.inf, hi: float = np.inf
+    path: Path,
+    frame: pd.DataFrame,
+    col: str,
+    *,
+    default: float | None = None,
+    lo: float = -np.inf,
+    hi: float = np.inf,
 ) -> NDArray[np.float64]:
     """Numbers in [lo, hi]; an empty cell takes `default` (NaN if None and allowed)."""
     if col not in frame.columns:
@@ -144,14 +150,17 @@ def parse_float_column(
     text = frame[col]
     values = pd.to_numeric(text.where(text != "", None), errors="coerce").to_numpy(dtype=float)
     for row in np.flatnonzero(np.isnan(values) & (text != "").to_numpy()):
-        raise InputError(f"{path}: line {_line(row)}: field {col!r}: expected a number, got {text.iloc[row]!r}")
+        raise InputError(
+            f"{path}: line {_line(row)}: field {col!r}: expected a number, got {text.iloc[row]!r}"
+        )
     empty = (text == "").to_numpy()
     if default is not None:
         values[empty] = default
     bad = ~empty & ~((values >= lo) & (values <= hi))
     for row in np.flatnonzero(bad):
         raise InputError(
-            f"{path}: line {_line(row)}: field {col!r}: expected a finite value in [{lo:g}, {hi:g}], got {text.iloc[row]!r}"
+            f"{path}: line {_line(row)}: field {col!r}: "
+            f"expected a finite value in [{lo:g}, {hi:g}], got {text.iloc[row]!r}"
         )
     return values
 
@@ -302,13 +311,17 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
         for row, lab in enumerate(labels):
             if lab and lab not in known:
                 raise InputError(
-                    f"{path}: line {_line(row)}: field 'beacon_id': unknown beacon {lab!r}{nearest(lab, known)}"
+                    f"{path}: line {_line(row)}: field 'beacon_id': "
+                    f"unknown beacon {lab!r}{nearest(lab, known)}"
                 )
 
     key = pd.DataFrame({"t": times, "toa": toa})
     dup = key.duplicated().to_numpy()
     if dup.any():
-        warnings.add(f"{path}: {int(dup.sum())} duplicate row(s) dropped (first at line {_line(int(np.flatnonzero(dup)[0]))})")
+        warnings.add(
+            f"{path}: {int(dup.sum())} duplicate row(s) dropped "
+            f"(first at line {_line(int(np.flatnonzero(dup)[0]))})"
+        )
     outside = ~np.isnan(toa) & ((toa < 0) | (toa > info.window_s))
     if outside.any():
         row = int(np.flatnonzero(outside)[0])
@@ -340,5 +353,8 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
         win_labels = tuple(lab if lab else None for lab in labels[rows]) if labelled else None
         windows.append(Window(time=window_time, toa_s=toa[rows], beacon_id=win_labels))
     if truncated:
-        warnings.add(f"{path}: {truncated} window(s) held more than max_signals={info.max_signals} TOAs; kept the earliest")
+        warnings.add(
+            f"{path}: {truncated} window(s) held more than max_signals={info.max_signals} TOAs; "
+            "kept the earliest"
+        )
     return ArrivalRecord(float_id=info.float_id, path=path, windows=tuple(windows))

@@ -54,13 +54,17 @@ class WindowBeacons:
     delay_s: NDArray[np.float64]  # offset + drift * days + float clock offset
 
 
-def window_beacons(beacons: BeaconTable, info: FloatInfo, time: np.datetime64) -> WindowBeacons:
-    """Active beacons at `time` with the range-independent part of their arrival time.
+def window_beacons(
+    beacons: BeaconTable, info: FloatInfo, time: np.datetime64, index: NDArray[np.intp] | None = None
+) -> WindowBeacons:
+    """Beacons at `time` (the active ones, or the rows `index`) with the range-independent
+    part of their arrival time.
 
     Source clock drift accrues from the beacon's `start` date, or from the float's launch
     when the beacon has none; the float clock offset is interpolated linearly in time.
     """
-    index = np.flatnonzero(beacons.active_at(time))
+    if index is None:
+        index = np.flatnonzero(beacons.active_at(time))
     epoch = np.where(np.isnat(beacons.start[index]), info.launch_time, beacons.start[index])
     days = (time - epoch) / np.timedelta64(1, "s") / SECONDS_PER_DAY
     delay = beacons.offset_s[index] + beacons.drift_s_per_day[index] * days + info.clock_offset_s(time)

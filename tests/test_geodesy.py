@@ -1,0 +1,52 @@
+"""Geodesy against GeographicLib (Karney's algorithms), an independent implementation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from geographiclib.geodesic import Geodesic
+
+from rafostrack.geodesy import displace, local_offsets_km, range_m, wrap_lon
+
+
+def test_ranges_match_geographiclib_within_10m_up_to_3000km():
+    rng = np.random.default_rng(42)
+    cases = []
+    for lat0 in (-75.0, -60.0, -30.0, 0.0, 30.0, 60.0, 75.0):
+        for _ in range(150):
+            lat1, lon1 = lat0 + rng.uniform(-3, 3), rng.uniform(-180, 180)
+            d = Geodesic.WGS84.Direct(lat1, lon1, rng.uniform(0, 360), rng.uniform(0.0, 3000e3))
+            cases.append((lat1, lon1, d["lat2"], d["lon2"], d["s12"]))
+    lat1, lon1, lat2, lon2, truth = np.array(cases).T
+    err = np.abs(range_m(lat1, lon1, lat2, lon2) - truth)
+    assert err.max() < 10.0
+
+
+def test_range_is_symmetric_and_zero_at_a_point():
+    assert range_m(-58.0, -100.0, -58.0, -100.0) == 0.0
+    a = range_m(-58.0, -100.0, -60.0, -80.0)
+    assert a == pytest.approx(range_m(-60.0, -80.0, -58.0, -100.0), rel=1e-12)
+
+
+def test_range_broadcasts_particles_against_beacons():
+    lat = np.array([-58.0, -57.0, -56.0])[:, None]
+    lon = np.array([-100.0, -99.0, -98.0])[:, None]
+    out = range_m(lat, lon, np.array([-60.0, -55.0]), np.array([-90.0, -95.0]))
+    assert out.shape == (3, 2)
+
+
+def test_displace_and_offsets_round_trip():
+    lat, lon = np.array([-58.0, 10.0]), np.array([179.5, -20.0])
+    new_lat, new_lon = displace(lat, lon, np.array([40.0, -3.0]), np.array([-25.0, 7.0]))
+    assert -180 <= new_lon[0] < 180  # crossed the antimeridian
+    for k in range(2):
+        east, north = local_offsets_km(new_lat[k], new_lon[k], lat[k], lon[k])
+        assert float(east) == pytest.approx([40.0, -3.0][k], abs=0.05)
+        assert float(north) == pytest.approx([-25.0, 7.0][k], abs=0.05)
+    # Small displacements agree with the geodesic distance.
+    d = range_m(lat[1], lon[1], new_lat[1], new_lon[1])
+    assert d == pytest.approx(np.hypot(3e3, 7e3), rel=1e-3)
+
+
+def test_wrap_lon():
+    assert np.allclose(wrap_lon([180.0, -180.0, 190.0, 359.0, -181.0]), [-180.0, -180.0, -170.0, -1.0, 179.0])

@@ -1,0 +1,136 @@
+"""The measurement model against independent oracles.
+
+The strongest check: p(T | X) is a probability density over everything a window can hold
+(K = 0..r stored TOAs, ascending), so it must integrate to 1. That tests the horizon rule
+(full vs partial windows), the late/missed factors and the clutter term together.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from geographiclib.geodesic import Geodesic
+from scipy import integrate
+
+from rafostrack import model as m
+from rafostrack.config import load_config
+from rafostrack.engines import exact
+from rafostrack.inputs import BeaconTable, FloatInfo
+
+NAT = np.datetime64("NaT", "ns")
+
+
+def _model(**changes) -> m.ModelConfig:
+    return dataclasses.replace(load_config().model, **changes)
+
+
+def _loglik(mu, p_detect, toas, max_signals, window_s, model, ranked=True) -> float:
+    f = m.association_factors(
+        np.atleast_2d(mu),
+        np.full((1, len(mu)), p_detect),
+        np.asarray(toas, dtype=float),
+        max_signals=max_signals,
+        window_s=window_s,
+        model=model,
+        ranked=ranked,
+    )
+    return float(f.log_base + exact.associate(f.log_match, f.log_unheard).log_z[0])
+
+
+@pytest.mark.parametrize("multipath", [0.0, 0.2])
+def test_likelihood_integrates_to_one_r1(multipath):
+    """r = 1, three beacons (one near the window's end): P(K=0) + int p(T1) dT1 = 1."""
+    model = _model(toa_sigma_s=2.0, clutter_rate=0.7, multipath_fraction=multipath, multipath_delay_s=5.0)
+    mu, w = np.array([8.0, 14.0, 39.0]), 40.0
+    p0 = np.exp(_loglik(mu, 0.8, [], 1, w, model))
+    p1, _ = integrate.quad(lambda t: np.exp(_loglik(mu, 0.8, [t], 1, w, model)), 0, w, points=list(mu), limit=200)
+    assert p0 + p1 == pytest.approx(1.0, abs=1e-7)
+
+
+def test_likelihood_integrates_to_one_r2():
+    """r = 2, two beacons: P(K=0) + int p(T1) + int int_{T1<T2} p(T1, T2) = 1."""
+    model = _model(toa_sigma_s=1.5, clutter_rate=1.3)
+    mu, w, pd = np.array([6.0, 12.0]), 20.0, 0.75
+    p0 = np.exp(_loglik(mu, pd, [], 2, w, model))
+    p1, _ = integrate.quad(lambda t: np.exp(_loglik(mu, pd, [t], 2, w, model)), 0, w, points=list(mu))
+    p2, _ = integrate.dblquad(
+        lambda t2, t1: np.exp(_loglik(mu, pd, [t1, t2], 2, w, model)), 0, w, lambda t1: t1, w, epsabs=1e-9
+    )
+    assert p0 + p1 + p2 == pytest.approx(1.0, abs=1e-6)
+
+
+def test_ranking_penalises_a_beacon_predicted_early_but_not_stored():
+    """A full window whose TOAs all come after beacon 0's prediction: positions that put
+    beacon 0 early are unlikely under the ranked model, indifferent under the baseline."""
+    model = _model(toa_sigma_s=1.0, clutter_rate=0.1)
+    toas = [50.0, 60.0]
+    early = np.array([10.0, 50.0, 60.0])  # beacon 0 should have been stored first
+    late = np.array([90.0, 50.0, 60.0])  # beacon 0 arrives after the last stored TOA
+    ranked_gap = _loglik(late, 0.9, toas, 2, 100.0, model) - _loglik(early, 0.9, toas, 2, 100.0, model)
+    unranked_gap = _loglik(late, 0.9, toas, 2, 100.0, model, ranked=False) - _loglik(
+        early, 0.9, toas, 2, 100.0, model, ranked=False
+    )
+    assert ranked_gap > np.log(5.0)  # missing a detectable early signal costs ~log(1 / (1 - Pd))
+    assert unranked_gap == pytest.approx(0.0, abs=1e-9)
+
+
+def test_toa_density_and_cdf_agree():
+    """f integrates to 1 and F is its integral, with and without the multipath tail."""
+    for eps in (0.0, 0.3):
+        model = _model(toa_sigma_s=2.0, multipath_fraction=eps, multipath_delay_s=15.0)
+        total, _ = integrate.quad(lambda r: np.exp(m.toa_logpdf(np.array(r), model)), -50, 400, limit=200)
+        assert total == pytest.approx(1.0, abs=1e-8)
+        part, _ = integrate.quad(lambda r: np.exp(m.toa_logpdf(np.array(r), model)), -50, 7.0, limit=200)
+        assert m.toa_cdf(np.array(7.0), model) == pytest.approx(part, abs=1e-8)
+
+
+def test_predicted_arrival_by_hand():
+    """mu = offset + drift * days since start + range / c + float clock offset."""
+    beacons = BeaconTable(
+        beacon_id=np.array(["A"], dtype=object),
+        lat=np.array([-58.0]),
+        lon=np.array([-100.0]),
+        offset_s=np.array([300.0]),
+        drift_s_per_day=np.array([0.01]),
+        start=np.array([np.datetime64("2009-01-01T00:00", "ns")]),
+        end=np.array([NAT]),
+    )
+    info = FloatInfo(
+        float_id="f",
+        launch_time=np.datetime64("2009-01-11T00:00", "ns"),
+        launch_lat=-57.0,
+        launch_lon=-101.0,
+        end_time=np.datetime64("2009-01-21T00:00", "ns"),
+        end_lat=np.nan,
+        end_lon=np.nan,
+        clock_offset_start_s=1.0,
+        clock_offset_end_s=-3.0,
+        window_s=4000.0,
+        max_signals=4,
+    )
+    model = _model(sound_speed_m_s=1480.0)
+    t = np.datetime64("2009-01-16T00:00", "ns")  # 15 days after start, half-way launch -> end
+    wb = m.window_beacons(beacons, info, t)
+    mu = m.predicted_toa_s(m.beacon_ranges_m(np.array([-57.0]), np.array([-101.0]), wb), wb, model)
+    rng_m = Geodesic.WGS84.Inverse(-57.0, -101.0, -58.0, -100.0)["s12"]
+    assert mu[0, 0] == pytest.approx(300.0 + 0.01 * 15 + rng_m / 1480.0 + (-1.0), abs=0.01)
+    # Not yet active before its start date.
+    assert len(m.window_beacons(beacons, info, np.datetime64("2008-12-31", "ns")).index) == 0
+
+
+def test_detection_falls_off_with_range():
+    model = _model(p_detect=0.9, detection_range_km=1000.0, detection_falloff_km=50.0)
+    pd_ = m.detection_prob(np.array([0.0, 1000e3, 2000e3]), model)
+    assert pd_[0] == pytest.approx(0.9, rel=1e-6)
+    assert pd_[1] == pytest.approx(0.45)
+    assert pd_[2] < 1e-6
+    assert np.all(m.detection_prob(np.array([5e6]), _model(p_detect=0.9)) == 0.9)
+
+
+def test_labeled_loglik_ignores_clutter_labels():
+    model = _model(toa_sigma_s=2.0)
+    mu = np.array([[10.0, 30.0]])
+    ll = m.labeled_loglik(mu, np.array([11.0, 20.0]), np.array([0, -1]), model)
+    assert ll[0] == pytest.approx(m.toa_logpdf(np.array(1.0), model))
