@@ -9,7 +9,9 @@ and backward: B_i(m) = weight of all completions by beacons i+1..s when m is tak
     Z = sum_m F_s(m),  P(i <-> j) = sum_{m not containing j} F_{i-1}(m) w_ij B_i(m + {j}) / Z.
 Cost O(s r 2^r) per particle. Arithmetic is linear but scaled: each beacon's factors are
 divided by u_i (so the "unmatched" option weighs 1 and no table entry can shrink), and each
-table is renormalised to a maximum of 1 with its log-scale kept aside.
+table is renormalised to a maximum of 1 with its log-scale kept aside. Marginals are
+assembled in log space. Accurate (1e-9 relative, tests/test_engines.py) for log(w_ij/u_i)
+within +-300; realistic windows stay within +-40.
 """
 
 from __future__ import annotations
@@ -86,9 +88,10 @@ def _associate_chunk(log_w: NDArray, k: int) -> tuple[NDArray, NDArray]:
 
     log_z = fwd_log[s] + np.log(fwd[s].sum(axis=1))
     p_match = np.empty((n, s, k))
-    for i in range(s):
-        rel = np.exp(fwd_log[i] + bwd_log[i + 1] - log_z)
-        for j, (without, with_j) in enumerate(moves):
-            pair = np.einsum("pm,pm->p", fwd[i][:, without], bwd[i + 1][:, with_j])
-            p_match[:, i, j] = pair * w[:, i, j] * rel
+    with np.errstate(divide="ignore"):  # a pair no matching uses has probability exactly 0
+        for i in range(s):
+            log_rel = fwd_log[i] + bwd_log[i + 1] - log_z
+            for j, (without, with_j) in enumerate(moves):
+                pair = np.einsum("pm,pm->p", fwd[i][:, without], bwd[i + 1][:, with_j])
+                p_match[:, i, j] = np.exp(np.log(pair) + log_w[:, i, j] + log_rel)
     return log_z, p_match

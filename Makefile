@@ -1,0 +1,38 @@
+# rafostrack: `make demo` sets up and tracks the sample float; `make test` sets up and tests.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test lint format bench sample clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/rafostrack track data/samples/float767.csv --out out
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+lint: $(STAMP)
+	$(BIN)/ruff check rafostrack tests benchmarks scripts
+	$(BIN)/ruff format --check rafostrack tests benchmarks scripts
+
+format: $(STAMP)
+	$(BIN)/ruff format rafostrack tests benchmarks scripts
+	$(BIN)/ruff check --fix rafostrack tests benchmarks scripts
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/accuracy.py
+	$(BIN)/python benchmarks/engines.py
+	$(BIN)/python benchmarks/speed.py
+
+sample: $(STAMP)
+	$(BIN)/python scripts/make_sample.py data/samples
+
+clean:
+	rm -rf out $(VENV) build *.egg-info .pytest_cache .ruff_cache

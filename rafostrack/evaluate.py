@@ -1,0 +1,41 @@
+"""Scores against simulated truth: association accuracy and position error."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from .geodesy import range_m
+from .inputs import ArrivalRecord
+
+
+def true_labels(record: ArrivalRecord) -> list[str | None]:
+    """The record's known labels, one per stored TOA in output order (window, rank)."""
+    return [label for window in record.windows for label in (window.beacon_id or (None,) * window.n_signals)]
+
+
+def association_accuracy(labels: pd.DataFrame, record: ArrivalRecord) -> float:
+    """Fraction of stored TOAs whose label (beacon or clutter) equals the truth."""
+    truth = true_labels(record)
+    if len(truth) != len(labels):
+        raise ValueError(f"{len(labels)} labels for {len(truth)} stored TOAs")
+    if not truth:
+        return float("nan")
+    estimated = [b if isinstance(b, str) else None for b in labels["beacon_id"]]
+    return float(np.mean([a == b for a, b in zip(estimated, truth, strict=True)]))
+
+
+def position_errors_km(track: pd.DataFrame, truth: pd.DataFrame) -> NDArray[np.float64]:
+    """Distance (km) from each track row to the true position at the same time."""
+    true = truth.set_index(pd.to_datetime(truth["time"])).loc[pd.to_datetime(track["time"])]
+    return (
+        range_m(
+            track["lat"].to_numpy(), track["lon"].to_numpy(), true["lat"].to_numpy(), true["lon"].to_numpy()
+        )
+        / 1e3
+    )
+
+
+def rmse_km(track: pd.DataFrame, truth: pd.DataFrame) -> float:
+    return float(np.sqrt(np.mean(position_errors_km(track, truth) ** 2)))

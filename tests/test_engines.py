@@ -1,0 +1,192 @@
+"""Every association engine against one brute-force oracle.
+
+The oracle enumerates every assignment of each signal to {clutter} U beacons that uses
+each beacon at most once and sums the products of the factors directly in float64.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from rafostrack.config import load_config
+from rafostrack.engines import Association, bp, exact
+from rafostrack.errors import InputError
+from rafostrack.model import association_factors
+
+ENGINES: dict[str, Callable[[NDArray, NDArray], Association]] = {
+    "exact": exact.associate,
+    "bp": bp.associate,
+}
+MARGINAL_TOL = {"exact": 1e-9, "bp": 1e-6}
+
+
+def oracle(log_match: NDArray, log_unheard: NDArray) -> tuple[NDArray, NDArray]:
+    """(log Z, pair marginals) by enumerating all partial matchings, per particle."""
+    n, s, k = log_match.shape
+    w = np.exp(log_match)
+    u = np.exp(log_unheard)
+    # Signal j's source: beacon index, or s for clutter. Keep the injective ones.
+    rows = [a for a in itertools.product(range(s + 1), repeat=k) if _injective(a, s)]
+    assign = np.array(rows, dtype=np.intp).reshape(len(rows), k)  # (M, K)
+    w_ext = np.concatenate([w, np.ones((n, 1, k))], axis=1)  # clutter weighs 1
+    terms = np.ones((n, len(assign)))
+    for j in range(k):
+        terms *= w_ext[:, assign[:, j], j]
+    heard = (assign[:, :, None] == np.arange(s)).any(axis=1)  # (M, s)
+    terms *= np.where(heard[None], 1.0, u[:, None, :]).prod(axis=2)
+    z = terms.sum(axis=1)
+    p_match = np.zeros((n, s, k))
+    for i in range(s):
+        for j in range(k):
+            p_match[:, i, j] = terms[:, assign[:, j] == i].sum(axis=1) / z
+    return np.log(z), p_match
+
+
+def _injective(assignment: tuple[int, ...], s: int) -> bool:
+    used = [a for a in assignment if a < s]
+    return len(used) == len(set(used))
+
+
+def random_forest_mask(rng: np.random.Generator, s: int, k: int) -> NDArray[np.bool_]:
+    """A random forest on the bipartite graph beacons x signals, as an (s, K) edge mask."""
+    parent = list(range(s + k))
+
+    def root(v: int) -> int:
+        while parent[v] != v:
+            parent[v] = parent[parent[v]]
+            v = parent[v]
+        return v
+
+    mask = np.zeros((s, k), dtype=bool)
+    for e in rng.permutation(s * k):
+        i, j = divmod(int(e), k)
+        a, b = root(i), root(s + j)
+        if a != b and rng.random() < 0.8:
+            parent[a] = b
+            mask[i, j] = True
+    return mask
+
+
+def tree_case(seed: int) -> tuple[NDArray, NDArray]:
+    """Factors that vanish off a random forest; every third case has log w in [-30, 30]
+    (one dominant term in a leave-one-out sum then hides the others if computed as
+    total - own)."""
+    rng = np.random.default_rng(seed)
+    n, s, k = 3, int(rng.integers(1, 7)), int(rng.integers(1, 6))
+    spread = 30.0 if seed % 3 == 0 else 8.0
+    log_match = np.full((n, s, k), -np.inf)
+    for p in range(n):
+        mask = random_forest_mask(rng, s, k)
+        log_match[p][mask] = rng.uniform(-spread, spread, mask.sum())
+    return log_match, rng.uniform(-3, 1, (n, s))
+
+
+def dense_case(seed: int, *, n: int = 4) -> tuple[NDArray, NDArray]:
+    """Random dense factors; every fifth case has extreme weights (log w in [-30, 30])."""
+    rng = np.random.default_rng(seed)
+    s, k = int(rng.integers(1, 8)), int(rng.integers(0, 5))
+    spread = 30.0 if seed % 5 == 0 else 5.0
+    log_match = rng.uniform(-spread, spread, (n, s, k))
+    log_unheard = rng.uniform(-spread / 2, min(spread / 2, 3.0), (n, s))
+    return log_match, log_unheard
+
+
+def assert_matches_oracle(result: Association, log_match: NDArray, log_unheard: NDArray, tol: float) -> None:
+    log_z, p_match = oracle(log_match, log_unheard)
+    np.testing.assert_allclose(result.log_z, log_z, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(result.p_match, p_match, rtol=0, atol=tol)
+
+
+@pytest.mark.parametrize("engine", sorted(ENGINES))
+@pytest.mark.parametrize("seed", range(40))
+def test_tree_cases_match_oracle(engine: str, seed: int) -> None:
+    log_match, log_unheard = tree_case(seed)
+    result = ENGINES[engine](log_match, log_unheard)
+    assert np.isfinite(result.log_z).all() and np.isfinite(result.p_match).all()
+    assert_matches_oracle(result, log_match, log_unheard, MARGINAL_TOL[engine])
+
+
+@pytest.mark.parametrize("engine", sorted(ENGINES))
+@pytest.mark.parametrize("shape", [(2, 0, 3), (2, 3, 0), (2, 0, 0)])
+def test_empty_windows(engine: str, shape: tuple[int, int, int]) -> None:
+    n, s, _ = shape
+    log_unheard = np.linspace(-1, 0, n * s).reshape(n, s)
+    result = ENGINES[engine](np.zeros(shape), log_unheard)
+    np.testing.assert_allclose(result.log_z, log_unheard.sum(axis=1))
+    assert result.p_match.shape == shape
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_exact_dense_cases_match_oracle(seed: int) -> None:
+    log_match, log_unheard = dense_case(seed)
+    assert_matches_oracle(exact.associate(log_match, log_unheard), log_match, log_unheard, 1e-9)
+
+
+@pytest.mark.parametrize("shape", [(3, 1, 1), (3, 1, 4), (3, 7, 1), (3, 7, 4), (3, 4, 0)])
+def test_exact_corner_shapes_match_oracle(shape: tuple[int, int, int]) -> None:
+    rng = np.random.default_rng(sum(shape))
+    log_match = rng.uniform(-30, 30, shape)
+    log_unheard = rng.uniform(-10, 3, shape[:2])
+    assert_matches_oracle(exact.associate(log_match, log_unheard), log_match, log_unheard, 1e-9)
+
+
+def test_bp_bethe_bound_and_valid_marginals() -> None:
+    """On loopy graphs the Bethe log Z never exceeds the exact one; beliefs stay valid."""
+    for seed in range(300):
+        log_match, log_unheard = dense_case(1000 + seed)
+        approx = bp.associate(log_match, log_unheard)
+        truth = exact.associate(log_match, log_unheard)
+        assert np.all(approx.log_z <= truth.log_z + 1e-9), seed
+        p = approx.p_match
+        assert np.isfinite(p).all() and np.all((p >= 0.0) & (p <= 1.0)), seed
+        assert np.all(p.sum(axis=2) <= 1.0 + 1e-12), seed
+        assert np.all(p.sum(axis=1) <= 1.0 + 1e-6), seed
+
+
+def test_bp_leave_one_out_sum_does_not_cancel() -> None:
+    x = np.array([[[1e20, 1.0, 2.0], [3.0, 1e-30, 0.0]]])
+    np.testing.assert_array_equal(
+        bp._leave_one_out_sum(x, axis=2), [[[3.0, 1e20 + 2.0, 1e20 + 1.0], [1e-30, 3.0, 3.0]]]
+    )
+    np.testing.assert_array_equal(bp._leave_one_out_sum(x, axis=1), [[[3.0, 1e-30, 0.0], [1e20, 1.0, 2.0]]])
+
+
+def test_exact_refuses_many_signals() -> None:
+    with pytest.raises(InputError, match="--method bp"):
+        exact.associate(np.zeros((1, 2, 13)), np.zeros((1, 2)))
+
+
+def realistic_factors() -> tuple[NDArray, NDArray]:
+    model = load_config().model
+    rng = np.random.default_rng(7)
+    base = rng.uniform(300.0, 3900.0, 6)
+    mu = base + rng.normal(0.0, 5.0, (5, 6))  # 5 particles, 6 beacons
+    toa = np.sort(np.r_[base[[0, 2, 3]] + rng.normal(0.0, 2.0, 3), rng.uniform(0, model.window_s)])
+    f = association_factors(
+        mu,
+        np.full(mu.shape, model.p_detect),
+        toa,
+        max_signals=model.max_signals,
+        window_s=model.window_s,
+        model=model,
+    )
+    return f.log_match, f.log_unheard
+
+
+def test_exact_realistic_case_matches_oracle() -> None:
+    log_match, log_unheard = realistic_factors()
+    assert_matches_oracle(exact.associate(log_match, log_unheard), log_match, log_unheard, 1e-9)
+
+
+def test_bp_realistic_case_is_close() -> None:
+    log_match, log_unheard = realistic_factors()
+    approx = bp.associate(log_match, log_unheard)
+    truth = exact.associate(log_match, log_unheard)
+    assert np.all(approx.log_z <= truth.log_z + 1e-9)
+    np.testing.assert_allclose(approx.log_z, truth.log_z, atol=0.1)
+    np.testing.assert_allclose(approx.p_match, truth.p_match, atol=0.05)
