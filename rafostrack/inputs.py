@@ -148,7 +148,7 @@ def parse_float_column(
     if col not in frame.columns:
         return np.full(len(frame), np.nan if default is None else default)
     text = frame[col]
-    values = pd.to_numeric(text.where(text != "", None), errors="coerce").to_numpy(dtype=float)
+    values = pd.to_numeric(text.where(text != "", None), errors="coerce").to_numpy(dtype=float, copy=True)
     for row in np.flatnonzero(np.isnan(values) & (text != "").to_numpy()):
         raise InputError(
             f"{path}: line {_line(row)}: field {col!r}: expected a number, got {text.iloc[row]!r}"

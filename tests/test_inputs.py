@@ -101,3 +101,11 @@ def test_labels_are_kept_with_their_toas(tmp_path):
     )
     assert record.windows[0].beacon_id == (None, "A")
     assert record.has_labels
+
+
+def test_empty_optional_cells_take_defaults(tmp_path):
+    beacons = read_beacons(_write(tmp_path, "beacons.csv", "beacon_id,lat,lon,offset_s,drift_s_per_day\nA,-58,-100,,\n"))
+    assert beacons.offset_s.tolist() == [0.0] and beacons.drift_s_per_day.tolist() == [0.0]
+    floats = "float_id,launch_time,launch_lat,launch_lon,window_s,max_signals\nf1,2009-01-01,-57,-98,,\n"
+    info = read_floats(_write(tmp_path, "floats.csv", floats), load_config().model)["f1"]
+    assert info.window_s == load_config().model.window_s and info.max_signals == load_config().model.max_signals
