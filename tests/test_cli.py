@@ -53,7 +53,17 @@ def test_mission_config_and_flags_are_layered(mission_dir, tmp_path):
     float_file = _float_file(mission_dir)
     cfg = tmp_path / "extra.toml"
     cfg.write_text("[filter]\nparticles = 120\nmethod = 'bp'\n")
-    args = ["track", str(float_file), "--out", str(tmp_path), "--config", str(cfg), "--method", "unranked", "--no-plots"]
+    args = [
+        "track",
+        str(float_file),
+        "--out",
+        str(tmp_path),
+        "--config",
+        str(cfg),
+        "--method",
+        "unranked",
+        "--no-plots",
+    ]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     run = json.loads((tmp_path / float_file.stem / "run.json").read_text())

@@ -96,15 +96,15 @@ def test_unknown_label(tmp_path):
 
 
 def test_labels_are_kept_with_their_toas(tmp_path):
-    _, _, record, _ = _mission(
-        tmp_path, "time,toa_s,beacon_id\n2009-01-02T00:00Z,300,A\n2009-01-02T00:00Z,100,\n"
-    )
+    _, _, record, _ = _mission(tmp_path, "time,toa_s,beacon_id\n2009-01-02T00:00Z,300,A\n2009-01-02T00:00Z,100,\n")
     assert record.windows[0].beacon_id == (None, "A")
     assert record.has_labels
 
 
 def test_empty_optional_cells_take_defaults(tmp_path):
-    beacons = read_beacons(_write(tmp_path, "beacons.csv", "beacon_id,lat,lon,offset_s,drift_s_per_day\nA,-58,-100,,\n"))
+    beacons = read_beacons(
+        _write(tmp_path, "beacons.csv", "beacon_id,lat,lon,offset_s,drift_s_per_day\nA,-58,-100,,\n")
+    )
     assert beacons.offset_s.tolist() == [0.0] and beacons.drift_s_per_day.tolist() == [0.0]
     floats = "float_id,launch_time,launch_lat,launch_lon,window_s,max_signals\nf1,2009-01-01,-57,-98,,\n"
     info = read_floats(_write(tmp_path, "floats.csv", floats), load_config().model)["f1"]

@@ -76,14 +76,16 @@ def test_ranking_penalises_a_beacon_predicted_early_but_not_stored():
     assert unranked_gap == pytest.approx(0.0, abs=1e-9)
 
 
-def test_toa_density_and_cdf_agree():
+@pytest.mark.parametrize("eps", [0.0, 0.3])
+def test_toa_density_and_cdf_agree(eps):
     """f integrates to 1 and F is its integral, with and without the multipath tail."""
-    for eps in (0.0, 0.3):
-        model = _model(toa_sigma_s=2.0, multipath_fraction=eps, multipath_delay_s=15.0)
-        total, _ = integrate.quad(lambda r: np.exp(m.toa_logpdf(np.array(r), model)), -50, 400, limit=200)
-        assert total == pytest.approx(1.0, abs=1e-8)
-        part, _ = integrate.quad(lambda r: np.exp(m.toa_logpdf(np.array(r), model)), -50, 7.0, limit=200)
-        assert m.toa_cdf(np.array(7.0), model) == pytest.approx(part, abs=1e-8)
+    model = _model(toa_sigma_s=2.0, multipath_fraction=eps, multipath_delay_s=15.0)
+
+    def density(r):
+        return np.exp(m.toa_logpdf(np.array(r), model))
+
+    assert integrate.quad(density, -50, 400, limit=200)[0] == pytest.approx(1.0, abs=1e-8)
+    assert m.toa_cdf(np.array(7.0), model) == pytest.approx(integrate.quad(density, -50, 7.0, limit=200)[0], abs=1e-8)
 
 
 def test_predicted_arrival_by_hand():
