@@ -37,9 +37,7 @@ def evaluate(clutter_rate: float, method: str, args: argparse.Namespace) -> dict
     correct, total, sq_err, n_pos, elapsed = 0, 0, 0.0, 0, 0.0
     for sim in mission.floats:
         started = time.perf_counter()
-        out = ParticleFilter(beacons, sim.info, config).run(
-            sim.record, float_rng(args.seed, sim.info.float_id)
-        )
+        out = ParticleFilter(beacons, sim.info, config).run(sim.record, float_rng(args.seed, sim.info.float_id))
         elapsed += time.perf_counter() - started
         n_toas = len(out.labels)
         correct += association_accuracy(out.labels, sim.record) * n_toas
@@ -64,9 +62,7 @@ def main() -> None:
     parser.add_argument("--rates", type=float, nargs="+", default=list(CLUTTER_RATES))
     args = parser.parse_args()
 
-    print(
-        f"{args.floats} floats x {args.days} days per clutter rate, {args.particles} particles, seed {args.seed}"
-    )
+    print(f"{args.floats} floats x {args.days} days per clutter rate, {args.particles} particles, seed {args.seed}")
     print(f"{'clutter':>8} {'method':>9} {'accuracy':>9} {'rmse_km':>8} {'seconds':>8}")
     results = {}
     for rate in args.rates:

@@ -84,9 +84,7 @@ def main(debug: bool) -> None:
     type=click.Path(path_type=Path),
     help="Beacon table (default: beacons.csv beside FLOAT_FILE).",
 )
-@click.option(
-    "--floats", type=click.Path(path_type=Path), help="Float table (default: floats.csv beside FLOAT_FILE)."
-)
+@click.option("--floats", type=click.Path(path_type=Path), help="Float table (default: floats.csv beside FLOAT_FILE).")
 @click.option("--launch", callback=_parse_launch, metavar="LAT,LON", help="Override the launch position.")
 @click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
 @click.option("--method", type=click.Choice(METHODS), help="Association method (default from config: exact).")

@@ -139,9 +139,7 @@ def _check_value(section: str, key: str, value: Any, expected: Any, source: str)
     return value
 
 
-def merge_layer(
-    base: dict[str, dict[str, Any]], layer: dict[str, Any], source: str
-) -> dict[str, dict[str, Any]]:
+def merge_layer(base: dict[str, dict[str, Any]], layer: dict[str, Any], source: str) -> dict[str, dict[str, Any]]:
     """Return `base` updated by `layer`, rejecting unknown sections/keys and bad values."""
     merged = copy.deepcopy(base)
     for section, values in layer.items():

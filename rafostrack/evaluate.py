@@ -30,10 +30,7 @@ def position_errors_km(track: pd.DataFrame, truth: pd.DataFrame) -> NDArray[np.f
     """Distance (km) from each track row to the true position at the same time."""
     true = truth.set_index(pd.to_datetime(truth["time"])).loc[pd.to_datetime(track["time"])]
     return (
-        range_m(
-            track["lat"].to_numpy(), track["lon"].to_numpy(), true["lat"].to_numpy(), true["lon"].to_numpy()
-        )
-        / 1e3
+        range_m(track["lat"].to_numpy(), track["lon"].to_numpy(), true["lat"].to_numpy(), true["lon"].to_numpy()) / 1e3
     )
 
 

@@ -124,12 +124,8 @@ class ParticleFilter:
         """Eq. (20) on the window's labelled beacons (active period not enforced: the label says
         the beacon was heard)."""
         if window.beacon_id is None:
-            raise InputError(
-                f"method 'labeled' needs a beacon_id column in the arrival file of {self.info.float_id}"
-            )
-        rows = np.array(
-            sorted({self._beacon_row[b] for b in window.beacon_id if b is not None}), dtype=np.intp
-        )
+            raise InputError(f"method 'labeled' needs a beacon_id column in the arrival file of {self.info.float_id}")
+        rows = np.array(sorted({self._beacon_row[b] for b in window.beacon_id if b is not None}), dtype=np.intp)
         wb = m.window_beacons(self.beacons, self.info, window.time, index=rows)
         mu = m.predicted_toa_s(m.beacon_ranges_m(lat, lon, wb), wb, self.config.model)
         column = {int(r): c for c, r in enumerate(rows)}
@@ -159,8 +155,7 @@ class ParticleFilter:
             loglik, p_match, wb = self.window_loglik(lat, lon, window)
             if not np.all(np.isfinite(loglik)):
                 raise FloatingPointError(
-                    f"{self.info.float_id}: non-finite likelihood at window {window.time}; "
-                    "check the model settings"
+                    f"{self.info.float_id}: non-finite likelihood at window {window.time}; check the model settings"
                 )
             _, log_prior = normalise_log_weights(log_w)
             weights, log_post = normalise_log_weights(log_w + loglik)
@@ -179,9 +174,7 @@ class ParticleFilter:
                     log_post - log_prior,
                 )
             )
-            label_rows.extend(
-                self._label_rows(record.float_id, window, wb, np.einsum("p,psk->sk", weights, p_match))
-            )
+            label_rows.extend(self._label_rows(record.float_id, window, wb, np.einsum("p,psk->sk", weights, p_match)))
             if eff < cfg.filter.resample_ess_fraction * n:
                 idx = systematic(weights, rng)
                 lat, lon, log_w = lat[idx], lon[idx], np.zeros(n)

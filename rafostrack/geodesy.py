@@ -55,9 +55,7 @@ def radii_of_curvature_m(lat_deg: ArrayLike) -> tuple[NDArray, NDArray]:
     return m, n
 
 
-def displace(
-    lat_deg: NDArray, lon_deg: NDArray, east_km: NDArray, north_km: NDArray
-) -> tuple[NDArray, NDArray]:
+def displace(lat_deg: NDArray, lon_deg: NDArray, east_km: NDArray, north_km: NDArray) -> tuple[NDArray, NDArray]:
     """Move points by small east/north displacements (km) in the local tangent plane."""
     m, n = radii_of_curvature_m(lat_deg)
     lat = lat_deg + np.degrees(north_km * 1e3 / m)

@@ -108,9 +108,7 @@ def read_csv_table(path: Path, required: tuple[str, ...], optional: tuple[str, .
     if not path.is_file():
         raise InputError(f"{path}: file not found")
     try:
-        frame = pd.read_csv(
-            path, dtype=str, keep_default_na=False, encoding="utf-8-sig", skipinitialspace=True
-        )
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False, encoding="utf-8-sig", skipinitialspace=True)
     except pd.errors.EmptyDataError:
         raise InputError(f"{path}: file is empty (expected a header line: {', '.join(required)})") from None
     except (pd.errors.ParserError, UnicodeDecodeError, OSError) as exc:
@@ -150,9 +148,7 @@ def parse_float_column(
     text = frame[col]
     values = pd.to_numeric(text.where(text != "", None), errors="coerce").to_numpy(dtype=float, copy=True)
     for row in np.flatnonzero(np.isnan(values) & (text != "").to_numpy()):
-        raise InputError(
-            f"{path}: line {_line(row)}: field {col!r}: expected a number, got {text.iloc[row]!r}"
-        )
+        raise InputError(f"{path}: line {_line(row)}: field {col!r}: expected a number, got {text.iloc[row]!r}")
     empty = (text == "").to_numpy()
     if default is not None:
         values[empty] = default
@@ -311,16 +307,14 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
         for row, lab in enumerate(labels):
             if lab and lab not in known:
                 raise InputError(
-                    f"{path}: line {_line(row)}: field 'beacon_id': "
-                    f"unknown beacon {lab!r}{nearest(lab, known)}"
+                    f"{path}: line {_line(row)}: field 'beacon_id': unknown beacon {lab!r}{nearest(lab, known)}"
                 )
 
     key = pd.DataFrame({"t": times, "toa": toa})
     dup = key.duplicated().to_numpy()
     if dup.any():
         warnings.add(
-            f"{path}: {int(dup.sum())} duplicate row(s) dropped "
-            f"(first at line {_line(int(np.flatnonzero(dup)[0]))})"
+            f"{path}: {int(dup.sum())} duplicate row(s) dropped (first at line {_line(int(np.flatnonzero(dup)[0]))})"
         )
     outside = ~np.isnan(toa) & ((toa < 0) | (toa > info.window_s))
     if outside.any():
@@ -354,7 +348,6 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
         windows.append(Window(time=window_time, toa_s=toa[rows], beacon_id=win_labels))
     if truncated:
         warnings.add(
-            f"{path}: {truncated} window(s) held more than max_signals={info.max_signals} TOAs; "
-            "kept the earliest"
+            f"{path}: {truncated} window(s) held more than max_signals={info.max_signals} TOAs; kept the earliest"
         )
     return ArrivalRecord(float_id=info.float_id, path=path, windows=tuple(windows))

@@ -28,9 +28,7 @@ def write_parquet(frame: pd.DataFrame, path: Path, metadata: dict[str, Any]) -> 
     if "time" in frame:
         frame["time"] = pd.to_datetime(frame["time"]).dt.tz_localize("UTC")
     table = pa.Table.from_pandas(frame, preserve_index=False)
-    extra = {
-        f"{METADATA_PREFIX}{k}".encode(): json.dumps(v, sort_keys=True).encode() for k, v in metadata.items()
-    }
+    extra = {f"{METADATA_PREFIX}{k}".encode(): json.dumps(v, sort_keys=True).encode() for k, v in metadata.items()}
     table = table.replace_schema_metadata({**(table.schema.metadata or {}), **extra})
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp)

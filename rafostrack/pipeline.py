@@ -150,9 +150,7 @@ def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True) -> T
     return TrackResult(loaded.info.float_id, out_dir, output, run)
 
 
-def run_record(
-    inputs: TrackInputs, loaded: LoadedFloat, output: FilterOutput, elapsed_s: float
-) -> dict[str, Any]:
+def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: FilterOutput, elapsed_s: float) -> dict[str, Any]:
     """The `run.json` payload: version, inputs with digests, config, method, runtime, counts."""
     files = {"float_file": inputs.float_path, "beacons": inputs.resolved_beacons()}
     floats_path = inputs.resolved_floats()

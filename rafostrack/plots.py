@@ -136,9 +136,7 @@ def _note(ax: Axes, text: str) -> None:
 # track map
 
 
-def _select_beacons(
-    beacons: BeaconTable, lat: NDArray, lon: NDArray, margin_km: float = 600.0
-) -> NDArray[np.bool_]:
+def _select_beacons(beacons: BeaconTable, lat: NDArray, lon: NDArray, margin_km: float = 600.0) -> NDArray[np.bool_]:
     """Beacons to draw: all if few, else those within a margin (km) of the points' extent."""
     if len(beacons) <= MAX_BEACONS_ALL or not np.isfinite(lat).any():
         return np.ones(len(beacons), dtype=bool)
@@ -270,9 +268,7 @@ def plot_track(
             ax.scatter(lon, lat, c=colors, s=10, zorder=3, label="estimated track")
             step = _draw_sd_circles(ax, times, lat, lon, _column(track, "sd_km"), colors)
             if step is not None:
-                handles.append(
-                    Patch(fc=(*cmap(0.5)[:3], 0.25), ec="k", lw=0.7, label=f"±1 sd (every {step:g} d)")
-                )
+                handles.append(Patch(fc=(*cmap(0.5)[:3], 0.25), ec="k", lw=0.7, label=f"±1 sd (every {step:g} d)"))
             if norm.vmax - norm.vmin > 1.0:  # a colour scale means nothing for one window
                 cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
                 _date_axis(cbar.ax.yaxis)
@@ -369,9 +365,7 @@ def plot_arrivals(
         marker = "_" if len(ptimes) == 1 else ""  # a one-point curve is drawn as a tick
         for k in shown:
             b = ids[k]
-            ax.plot(
-                ptimes, pred[:, k], "-", marker=marker, ms=12, color=colors[b], lw=1.0, alpha=0.8, zorder=2
-            )
+            ax.plot(ptimes, pred[:, k], "-", marker=marker, ms=12, color=colors[b], lw=1.0, alpha=0.8, zorder=2)
             handles.append(_scatter_beacon(ax, ltimes, toa, prob, label_ids == b, colors[b], b))
         for b in extra:
             handles.append(_scatter_beacon(ax, ltimes, toa, prob, label_ids == b, colors[b], b))
@@ -476,9 +470,7 @@ def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
         return _save(fig, path)
 
 
-def _line_panel(
-    ax: Axes, times: NDArray, values: NDArray, ylabel: str, color: str, log: bool = False
-) -> None:
+def _line_panel(ax: Axes, times: NDArray, values: NDArray, ylabel: str, color: str, log: bool = False) -> None:
     """A time series with small markers (NaN leaves gaps); a note when all values are missing."""
     ax.plot(times, values, "-", color=color, lw=1.0, marker=".", ms=3)
     ax.set_ylabel(ylabel)

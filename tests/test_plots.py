@@ -73,14 +73,10 @@ def make_track(n: int, *, sd: float | None = 5.0) -> pd.DataFrame:
 
 def make_labels(track: pd.DataFrame, beacons: BeaconTable, info: FloatInfo, model) -> pd.DataFrame:
     """One TOA per active beacon per window at the predicted time, plus one clutter TOA."""
-    pred = predicted_arrivals(
-        track.time.to_numpy(), track.lat.to_numpy(), track.lon.to_numpy(), beacons, info, model
-    )
+    pred = predicted_arrivals(track.time.to_numpy(), track.lat.to_numpy(), track.lon.to_numpy(), beacons, info, model)
     rows = []
     for k, t in enumerate(track.time):
-        toas = [
-            (pred[k, j], beacons.beacon_id[j], 0.9) for j in range(len(beacons)) if np.isfinite(pred[k, j])
-        ]
+        toas = [(pred[k, j], beacons.beacon_id[j], 0.9) for j in range(len(beacons)) if np.isfinite(pred[k, j])]
         toas.append((100.0 + 37.0 * k, None, 0.6))
         for rank, (toa, bid, p) in enumerate(sorted(toas, key=lambda r: r[0]), start=1):
             rows.append(

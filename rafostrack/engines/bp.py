@@ -129,9 +129,7 @@ def bethe_free_energy(log_w: NDArray, b_match: NDArray) -> NDArray:
     edge = xlogy(b_match, b_match) - energy - xlog1py(1.0 - b_match, -b_match)
     unmatched = np.clip(1.0 - b_match.sum(axis=2), 0.0, None)  # b_i
     clutter = np.clip(1.0 - b_match.sum(axis=1), 0.0, None)  # c_j
-    return (
-        edge.sum(axis=(1, 2)) + xlogy(unmatched, unmatched).sum(axis=1) + xlogy(clutter, clutter).sum(axis=1)
-    )
+    return edge.sum(axis=(1, 2)) + xlogy(unmatched, unmatched).sum(axis=1) + xlogy(clutter, clutter).sum(axis=1)
 
 
 def bethe_log_z(log_w: NDArray, b_match: NDArray) -> NDArray:
