@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test,dask]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -33,6 +33,14 @@ bench: $(STAMP)
 
 sample: $(STAMP)
 	$(BIN)/python scripts/make_sample.py data/samples
+
+# The paper's figures redone (figures/REPORT.md): under 15 min on 2 cores; -quick under 3 min.
+.PHONY: figures figures-quick
+figures: $(STAMP)
+	$(BIN)/python -m rafostrack.experiments --out figures
+
+figures-quick: $(STAMP)
+	$(BIN)/python -m rafostrack.experiments --quick --out figures
 
 clean:
 	rm -rf out $(VENV) build *.egg-info .pytest_cache .ruff_cache

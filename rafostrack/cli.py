@@ -19,24 +19,47 @@ from .errors import InputError
 
 
 def _report_errors(func):
-    """Turn user-facing errors into one line on stderr and exit code 2."""
+    """Turn errors into one line on stderr, no traceback (unless `--debug`): user-facing
+    errors (`InputError`, an unwritable output path) exit with code 2, unexpected ones with 1.
+    An `out_dir` argument is checked before any work."""
 
     @wraps(func)
     def wrapper(*args, **kwargs):
+        from .inputs import check_output_dir
+
         debug = click.get_current_context().find_root().params.get("debug", False)
+        out_dir = kwargs.get("out_dir")
         try:
+            if out_dir is not None:
+                check_output_dir(out_dir)
             return func(*args, **kwargs)
         except InputError as exc:
             if debug:
                 raise
             click.echo(f"rafostrack: error: {exc}", err=True)
             sys.exit(2)
-        except OSError as exc:  # e.g. output directory not writable
+        except OSError as exc:  # e.g. output directory not writable, disk full
             if debug:
                 raise
-            where = f"{exc.filename}: " if exc.filename else ""
-            click.echo(f"rafostrack: error: {where}{exc.strerror or exc}", err=True)
+            name = Path(exc.filename) if exc.filename else None
+            where, expected = (f"{name}: " if name else ""), ""
+            if out_dir is not None and name is not None and (name == Path(out_dir) or Path(out_dir) in name.parents):
+                where = f"cannot write output directory {out_dir}: {where}"
+                expected = "; expected a writable directory with room to write"
+            reason = " ".join(str(exc.strerror or exc).splitlines())
+            click.echo(f"rafostrack: error: {where}{reason}{expected}", err=True)
             sys.exit(2)
+        except (click.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except Exception as exc:  # a bug, not a user mistake: still one line unless --debug
+            if debug:
+                raise
+            reason = " ".join(str(exc).splitlines()) or "no message"
+            click.echo(
+                f"rafostrack: internal error: {type(exc).__name__}: {reason} (rerun with --debug for the traceback)",
+                err=True,
+            )
+            sys.exit(1)
 
     return wrapper
 
@@ -62,11 +85,13 @@ def _overrides(**flags: Any) -> dict[str, dict[str, Any]]:
         "clutter_rate": "model",
         "p_detect": "model",
         "toa_sigma_s": "model",
+        "smooth": "smoother",
     }
     out: dict[str, dict[str, Any]] = {}
-    for key, value in flags.items():
+    keys = {"smooth": "enabled"}  # flag name -> config key where they differ
+    for flag, value in flags.items():
         if value is not None:
-            out.setdefault(where[key], {})[key] = value
+            out.setdefault(where[flag], {})[keys.get(flag, flag)] = value
     return out
 
 
@@ -95,8 +120,10 @@ def main(debug: bool) -> None:
 @click.option("--toa-sigma-s", type=float, help="Arrival-time noise sd (s).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"), show_default=True)
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
+@click.option("--no-smooth", is_flag=True, help="Filter only: no backward smoothing over the mission.")
+@click.option("--also-filtered", is_flag=True, help="Also write the filtered estimate (*_filtered.parquet).")
 @_report_errors
-def track(float_file, beacons, floats, launch, config_file, out_dir, no_plots, **flags) -> None:
+def track(float_file, beacons, floats, launch, config_file, out_dir, no_plots, no_smooth, also_filtered, **flags):
     """Label every TOA of FLOAT_FILE and estimate the float's track."""
     from .pipeline import TrackInputs, track_float
 
@@ -106,11 +133,14 @@ def track(float_file, beacons, floats, launch, config_file, out_dir, no_plots, *
         floats_path=floats,
         launch=launch,
         config_files=(config_file,) if config_file else (),
-        overrides=_overrides(**flags),
+        overrides=_overrides(**flags, smooth=False if no_smooth else None),
     )
-    result = track_float(inputs, out_dir, plots=not no_plots)
+    result = track_float(inputs, out_dir, plots=not no_plots, also_filtered=also_filtered)
     for message in result.run["warnings"]:
         click.echo(f"rafostrack: warning: {message}", err=True)
+    if result.run["warnings"]:
+        n = len(result.run["warnings"])
+        click.echo(f"rafostrack: {n} warning(s), also listed in {result.out_dir / 'run.json'}", err=True)
     counts = result.run["counts"]
     click.echo(
         f"{result.float_id}: {counts['windows']} windows, {counts['toas']} TOAs "
@@ -123,8 +153,10 @@ def track(float_file, beacons, floats, launch, config_file, out_dir, no_plots, *
 @click.argument("out_dir", type=click.Path(path_type=Path))
 @click.option("--scenario", type=click.Choice(["dimes", "synthetic"]), default="synthetic", show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--days", type=int, help="Truncate each float to this many days.")
-@click.option("--n-floats", type=int, default=1, show_default=True, help="Floats (synthetic scenario).")
+@click.option("--days", type=click.IntRange(min=1), help="Truncate each float to this many days.")
+@click.option(
+    "--n-floats", type=click.IntRange(min=1), default=1, show_default=True, help="Floats (synthetic scenario)."
+)
 @click.option("--clutter-rate", type=float, help="Expected clutter signals per window.")
 @click.option("--p-detect", type=float, help="Detection probability.")
 @click.option("--toa-sigma-s", type=float, help="Arrival-time noise sd (s).")
@@ -146,3 +178,35 @@ def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> N
     mission = simulate_mission(beacons, floats, config.model, rng, days=days)
     write_mission(mission, out_dir)
     click.echo(f"simulated {len(mission.floats)} float(s) -> {out_dir}")
+
+
+@main.command()
+@click.argument("roots", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), required=True, help="Output root (mirrors ROOTs).")
+@click.option("--jobs", type=click.IntRange(min=1), help="Worker processes (default: the number of cores).")
+@click.option("--force", is_flag=True, help="Reprocess every float, even unchanged ones.")
+@click.option("--scheduler", metavar="ADDRESS", help="Run on this Dask scheduler (tcp://host:8786) instead.")
+@click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
+@click.option("--method", type=click.Choice(METHODS), help="Association method (default from config: exact).")
+@click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
+@_report_errors
+def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots) -> None:
+    """Track every float of the mission directories under ROOTs, skipping unchanged ones.
+
+    Exit code 0 when every float succeeded, 1 when some failed, 2 on a usage error
+    (including OUT being locked by another batch run).
+    """
+    from .batch import run_batch
+
+    result = run_batch(
+        roots,
+        out_dir,
+        jobs=jobs,
+        force=force,
+        scheduler=scheduler,
+        config_file=config_file,
+        overrides=_overrides(method=method),
+        plots=not no_plots,
+    )
+    click.echo(result.summary)
+    sys.exit(result.exit_code)

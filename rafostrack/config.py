@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 import tomllib
 from dataclasses import asdict, dataclass, fields
 from importlib import resources
@@ -39,10 +40,32 @@ class ModelConfig:
 
 @dataclass(frozen=True)
 class MotionConfig:
-    """Random-walk drift model (paper eq. 1) and launch uncertainty."""
+    """Random-walk drift model (paper eq. 1)."""
 
     diffusion_km_per_day: float
+
+
+@dataclass(frozen=True)
+class FixesConfig:
+    """Launch and end position fixes as observations."""
+
     launch_sd_km: float
+    end_sd_km: float
+    use_end_fix: bool
+
+
+@dataclass(frozen=True)
+class SmootherConfig:
+    enabled: bool
+
+
+@dataclass(frozen=True)
+class AmbiguityConfig:
+    """When a posterior counts as two separate modes (see posterior.two_modes)."""
+
+    min_mode_weight: float
+    min_separation_km: float
+    separation_factor: float
 
 
 @dataclass(frozen=True)
@@ -67,14 +90,25 @@ class BPConfig:
 class Config:
     model: ModelConfig
     motion: MotionConfig
+    fixes: FixesConfig
     filter: FilterConfig
+    smoother: SmootherConfig
+    ambiguity: AmbiguityConfig
     bp: BPConfig
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return asdict(self)
 
 
-_SECTIONS = {"model": ModelConfig, "motion": MotionConfig, "filter": FilterConfig, "bp": BPConfig}
+_SECTIONS = {
+    "model": ModelConfig,
+    "motion": MotionConfig,
+    "fixes": FixesConfig,
+    "filter": FilterConfig,
+    "smoother": SmootherConfig,
+    "ambiguity": AmbiguityConfig,
+    "bp": BPConfig,
+}
 
 # (predicate, what is expected) per key; keys not listed only need the right type.
 _RANGES: dict[tuple[str, str], tuple[Any, str]] = {
@@ -89,8 +123,12 @@ _RANGES: dict[tuple[str, str], tuple[Any, str]] = {
     ("model", "window_s"): (lambda v: v > 0, "> 0"),
     ("model", "max_signals"): (lambda v: v >= 1, ">= 1"),
     ("motion", "diffusion_km_per_day"): (lambda v: v > 0, "> 0"),
-    ("motion", "launch_sd_km"): (lambda v: v > 0, "> 0"),
-    ("filter", "particles"): (lambda v: v >= 2, ">= 2"),
+    ("fixes", "launch_sd_km"): (lambda v: v > 0, "> 0"),
+    ("fixes", "end_sd_km"): (lambda v: v > 0, "> 0"),
+    ("ambiguity", "min_mode_weight"): (lambda v: 0 < v <= 0.5, "in (0, 0.5]"),
+    ("ambiguity", "min_separation_km"): (lambda v: v >= 0, ">= 0"),
+    ("ambiguity", "separation_factor"): (lambda v: v > 0, "> 0"),
+    ("filter", "particles"): (lambda v: 2 <= v <= 10_000_000, "between 2 and 10000000"),
     ("filter", "seed"): (lambda v: v >= 0, ">= 0"),
     ("filter", "method"): (lambda v: v in METHODS, f"one of {', '.join(METHODS)}"),
     ("filter", "resample_ess_fraction"): (lambda v: 0 <= v <= 1, "in [0, 1]"),
@@ -99,16 +137,38 @@ _RANGES: dict[tuple[str, str], tuple[Any, str]] = {
 }
 
 
+_MAX_CONFIG_BYTES = 1 << 20  # a config file is a few KB; refuse absurd ones before parsing
+_DEEP_KEY = re.compile(r"(?:[^.\n=\[\]]{0,64}\.){64}")  # a key dotted 64 levels deep
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def _read_toml(path: Path) -> dict[str, Any]:
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read(_MAX_CONFIG_BYTES + 1)
     except FileNotFoundError:
-        raise InputError(f"{path}: config file not found") from None
+        raise InputError(f"{path}: config file not found (expected a TOML file)") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read config: {exc.strerror or exc}") from None
+    if len(data) > _MAX_CONFIG_BYTES:
+        raise InputError(f"{path}: config file larger than {_MAX_CONFIG_BYTES} bytes; expected a small TOML file")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(f"{path}: line {line}: not UTF-8 text; expected a UTF-8 TOML file") from None
+    if _DEEP_KEY.search(text):
+        raise InputError(f"{path}: keys nested 64 or more levels deep; expected [section] key = value")
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read config: {exc}") from None
+    except RecursionError:
+        raise InputError(f"{path}: not valid TOML: values nested too deeply") from None
 
 
 def _default_layer() -> dict[str, dict[str, Any]]:
@@ -119,23 +179,26 @@ def _default_layer() -> dict[str, dict[str, Any]]:
 def _check_value(section: str, key: str, value: Any, expected: Any, source: str) -> Any:
     where = f"{source}: [{section}] {key}"
     if isinstance(expected, bool) or isinstance(value, bool):
-        raise InputError(f"{where}: expected a {type(expected).__name__}, got {value!r}")
+        if not (isinstance(expected, bool) and isinstance(value, bool)):
+            kind = "true or false" if isinstance(expected, bool) else f"a {type(expected).__name__}"
+            raise InputError(f"{where}: expected {kind}, got {_short(value)}")
+        return value
     if isinstance(expected, float):
         if not isinstance(value, int | float):
-            raise InputError(f"{where}: expected a number, got {value!r}")
+            raise InputError(f"{where}: expected a number, got {_short(value)}")
         value = float(value)
         if not math.isfinite(value):
-            raise InputError(f"{where}: expected a finite number, got {value!r}")
+            raise InputError(f"{where}: expected a finite number, got {_short(value)}")
     elif isinstance(expected, int):
         if isinstance(value, float) and value.is_integer():
             value = int(value)
         if not isinstance(value, int):
-            raise InputError(f"{where}: expected a whole number, got {value!r}")
+            raise InputError(f"{where}: expected a whole number, got {_short(value)}")
     elif isinstance(expected, str) and not isinstance(value, str):
-        raise InputError(f"{where}: expected a string, got {value!r}")
+        raise InputError(f"{where}: expected a string, got {_short(value)}")
     check = _RANGES.get((section, key))
     if check is not None and not check[0](value):
-        raise InputError(f"{where}: must be {check[1]}, got {value!r}")
+        raise InputError(f"{where}: must be {check[1]}, got {_short(value)}")
     return value
 
 
@@ -143,13 +206,19 @@ def merge_layer(base: dict[str, dict[str, Any]], layer: dict[str, Any], source: 
     """Return `base` updated by `layer`, rejecting unknown sections/keys and bad values."""
     merged = copy.deepcopy(base)
     for section, values in layer.items():
+        if section not in base and not isinstance(values, dict):
+            owners = [s for s in base if section in base[s]]
+            hint = f"; expected it under [{owners[0]}]" if owners else "; expected [section] then key = value"
+            raise InputError(f"{source}: key {section!r} is outside any [section]{hint}")
         if section not in base:
-            raise InputError(f"{source}: unknown section [{section}]{nearest(section, base)}")
+            hint = nearest(section, base) or f" (expected one of {', '.join(f'[{s}]' for s in base)})"
+            raise InputError(f"{source}: unknown section [{section}]{hint}")
         if not isinstance(values, dict):
-            raise InputError(f"{source}: [{section}] must be a table of keys")
+            raise InputError(f"{source}: [{section}]: expected a table of keys, got {_short(values)}")
         for key, value in values.items():
             if key not in base[section]:
-                raise InputError(f"{source}: unknown key [{section}] {key}{nearest(key, base[section])}")
+                hint = nearest(key, base[section]) or f" (expected one of {', '.join(base[section])})"
+                raise InputError(f"{source}: unknown key [{section}] {key}{hint}")
             merged[section][key] = _check_value(section, key, value, base[section][key], source)
     return merged
 

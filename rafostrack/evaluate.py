@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from .geodesy import range_m
+from .geodesy import local_offsets_km, range_m
 from .inputs import ArrivalRecord
 
 
@@ -36,3 +36,16 @@ def position_errors_km(track: pd.DataFrame, truth: pd.DataFrame) -> NDArray[np.f
 
 def rmse_km(track: pd.DataFrame, truth: pd.DataFrame) -> float:
     return float(np.sqrt(np.mean(position_errors_km(track, truth) ** 2)))
+
+
+def inside_ellipse(track: pd.DataFrame, truth: pd.DataFrame, scale: float) -> NDArray[np.bool_]:
+    """Whether each true position lies inside the track's ellipse with semi-axes scaled by
+    `scale` (posterior.ELLIPSE_95_SCALE for the 95% ellipse)."""
+    true = truth.set_index(pd.to_datetime(truth["time"])).loc[pd.to_datetime(track["time"])]
+    east, north = local_offsets_km(true["lat"].to_numpy(), true["lon"].to_numpy(), track["lat"], track["lon"])
+    angle = np.radians(track["angle_deg"].to_numpy())  # major axis, clockwise from north
+    along = east * np.sin(angle) + north * np.cos(angle)
+    across = east * np.cos(angle) - north * np.sin(angle)
+    smaj = scale * track["smaj_km"].to_numpy()
+    smin = np.maximum(scale * track["smin_km"].to_numpy(), 1e-9)
+    return (along / smaj) ** 2 + (across / smin) ** 2 <= 1.0

@@ -161,17 +161,21 @@ def association_factors(
     return AssociationFactors(log_match, log_unheard, k * np.log(lam) - lam * h)
 
 
-def labeled_loglik(mu_s: NDArray, toa_s: NDArray, label_index: NDArray, model: ModelConfig) -> NDArray:
+def labeled_loglik(
+    mu_s: NDArray, toa_s: NDArray, label_index: NDArray, model: ModelConfig, sigma_scale: NDArray | None = None
+) -> NDArray:
     """Hand-labelled likelihood (eq. 20): prod over labelled TOAs of f(T_j - mu_{R_j}).
 
     `label_index[j]` is the column of `mu_s` of the TOA's beacon, or -1 for clutter,
-    which contributes nothing.
+    which contributes nothing. `sigma_scale[j]` widens TOA j's error density to
+    f(r / s) / s (1 = as configured).
     """
     used = label_index >= 0
     if not used.any():
         return np.zeros(mu_s.shape[0])
+    scale = np.ones(int(used.sum())) if sigma_scale is None else np.asarray(sigma_scale)[used]
     resid = toa_s[used][None, :] - mu_s[:, label_index[used]]
-    return toa_logpdf(resid, model).sum(axis=1)
+    return (toa_logpdf(resid / scale, model) - np.log(scale)).sum(axis=1)
 
 
 def predicted_arrivals(

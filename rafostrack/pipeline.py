@@ -6,6 +6,7 @@ to F; explicit paths and a launch position override them.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,12 +16,21 @@ import numpy as np
 
 from . import __version__
 from .config import Config, load_config
-from .errors import InputError, Warnings
-from .filter import FilterOutput, ParticleFilter, float_rng
-from .inputs import ArrivalRecord, BeaconTable, FloatInfo, read_arrivals, read_beacons, read_floats
+from .errors import InputError, Warnings, nearest
+from .inputs import (
+    ArrivalRecord,
+    BeaconTable,
+    FloatInfo,
+    check_output_dir,
+    read_arrivals,
+    read_beacons,
+    read_floats,
+)
 from .outputs import file_digest, write_json, write_parquet
+from .tracker import TrackOutput, track_record
 
 MISSION_CONFIG = "rafostrack.toml"
+EARLIEST_TIME = np.datetime64("1678-01-01T00:00", "ns")  # the readers' earliest accepted time
 
 
 @dataclass(frozen=True)
@@ -71,43 +81,40 @@ def load_float(inputs: TrackInputs) -> LoadedFloat:
         raise InputError(f"{inputs.float_path}: file not found")
     config = load_config(inputs.config_layers(), inputs.overrides)
     beacons = read_beacons(inputs.resolved_beacons())
-    info = _float_info(inputs, config)
     warnings = Warnings()
-    record = read_arrivals(inputs.float_path, info, beacons, warnings)
+    floats_path = inputs.resolved_floats()
+    if floats_path is None:  # --launch without floats.csv: launched at the first window
+        info = _info_from_launch(inputs, config)
+        record = read_arrivals(inputs.float_path, info, beacons, warnings)
+        info = dataclasses.replace(info, launch_time=record.windows[0].time)
+    else:
+        info = _float_info(floats_path, inputs, config)
+        record = read_arrivals(inputs.float_path, info, beacons, warnings)
     if config.filter.method == "labeled" and not record.has_labels:
         raise InputError(f"{inputs.float_path}: method 'labeled' needs a 'beacon_id' column of known labels")
     return LoadedFloat(config, beacons, info, record, warnings)
 
 
-def _float_info(inputs: TrackInputs, config: Config) -> FloatInfo:
-    floats_path = inputs.resolved_floats()
-    if floats_path is None:  # --launch without floats.csv: launch at the first window
-        return _info_from_launch(inputs, config)
+def _float_info(floats_path: Path, inputs: TrackInputs, config: Config) -> FloatInfo:
     floats = read_floats(floats_path, config.model)
     if inputs.float_id not in floats:
         raise InputError(
-            f"{floats_path}: no row for float_id {inputs.float_id!r} (the arrival file's name); "
-            f"known: {', '.join(sorted(floats)) or 'none'}"
+            f"{floats_path}: no row for float_id {inputs.float_id!r} (the arrival file's name)"
+            f"{nearest(inputs.float_id, floats)}; known: {', '.join(sorted(floats)) or 'none'}"
         )
     info = floats[inputs.float_id]
     if inputs.launch is not None:
-        info = FloatInfo(**{**info.__dict__, "launch_lat": inputs.launch[0], "launch_lon": inputs.launch[1]})
+        info = dataclasses.replace(info, launch_lat=inputs.launch[0], launch_lon=inputs.launch[1])
     return info
 
 
 def _info_from_launch(inputs: TrackInputs, config: Config) -> FloatInfo:
-    import pandas as pd
-
-    from .inputs import parse_time_column, read_csv_table
-
-    frame = read_csv_table(inputs.float_path, ("time", "toa_s"), ("quality", "beacon_id"))
-    times = parse_time_column(inputs.float_path, frame, "time")
-    if len(times) == 0:
-        raise InputError(f"{inputs.float_path}: no arrival times (header only)")
+    """The float's description from `--launch` alone; its launch time is set to the first
+    window's once the file is read (here: the earliest time the readers accept)."""
     nat = np.datetime64("NaT", "ns")
     return FloatInfo(
         float_id=inputs.float_id,
-        launch_time=pd.Timestamp(times.min()).to_datetime64(),
+        launch_time=EARLIEST_TIME,
         launch_lat=inputs.launch[0],
         launch_lon=inputs.launch[1],
         end_time=nat,
@@ -124,33 +131,50 @@ def _info_from_launch(inputs: TrackInputs, config: Config) -> FloatInfo:
 class TrackResult:
     float_id: str
     out_dir: Path
-    output: FilterOutput
+    output: TrackOutput
     run: dict[str, Any]
 
 
-def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True) -> TrackResult:
-    """Track one float and write `out_root/<float_id>/`: Parquet tables, plots, run.json."""
+def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also_filtered: bool = False) -> TrackResult:
+    """Track one float and write `out_root/<float_id>/`: Parquet tables, plots, run.json.
+
+    `track.parquet`, `labels.parquet` and `modes.parquet` hold the smoothed estimate (the
+    filtered one when the smoother is off; their metadata `estimate` says which);
+    `also_filtered` adds `*_filtered.parquet` beside them.
+    """
     started = time.perf_counter()
+    check_output_dir(Path(out_root))
     loaded = load_float(inputs)
     config = loaded.config
-    pf = ParticleFilter(loaded.beacons, loaded.info, config)
-    output = pf.run(loaded.record, float_rng(config.filter.seed, loaded.info.float_id))
+    output = track_record(loaded.beacons, loaded.info, config, loaded.record, also_filtered=also_filtered)
     elapsed = time.perf_counter() - started
 
     out_dir = Path(out_root) / loaded.info.float_id
-    meta = {"version": __version__, "method": config.filter.method, "config": config.to_dict()}
-    write_parquet(output.track, out_dir / "track.parquet", meta)
-    write_parquet(output.labels, out_dir / "labels.parquet", meta)
+    estimates = [(output.estimate, "")]
+    if also_filtered and output.filtered is not output.estimate:
+        estimates.append((output.filtered, "_filtered"))
+    for estimate, suffix in estimates:
+        meta = {
+            "version": __version__,
+            "method": config.filter.method,
+            "estimate": estimate.kind,
+            "config": config.to_dict(),
+        }
+        write_parquet(estimate.track, out_dir / f"track{suffix}.parquet", meta)
+        write_parquet(estimate.labels, out_dir / f"labels{suffix}.parquet", meta)
+        write_parquet(estimate.modes, out_dir / f"modes{suffix}.parquet", meta)
     if plots:
         from .plots import write_plots
 
-        write_plots(out_dir, output.track, output.labels, loaded.beacons, loaded.info, config.model)
+        write_plots(
+            out_dir, output.track, output.labels, loaded.beacons, loaded.info, config.model, modes=output.estimate.modes
+        )
     run = run_record(inputs, loaded, output, elapsed)
     write_json(out_dir / "run.json", run)
     return TrackResult(loaded.info.float_id, out_dir, output, run)
 
 
-def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: FilterOutput, elapsed_s: float) -> dict[str, Any]:
+def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, elapsed_s: float) -> dict[str, Any]:
     """The `run.json` payload: version, inputs with digests, config, method, runtime, counts."""
     files = {"float_file": inputs.float_path, "beacons": inputs.resolved_beacons()}
     floats_path = inputs.resolved_floats()
@@ -161,17 +185,21 @@ def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: FilterOutput, e
         "rafostrack_version": __version__,
         "float_id": loaded.info.float_id,
         "method": loaded.config.filter.method,
+        "estimate": output.estimate.kind,
         "inputs": {k: {"path": str(p), "sha256": file_digest(p)} for k, p in files.items()},
         "config_files": [str(p) for p in inputs.config_layers()],
         "config": loaded.config.to_dict(),
         "runtime_s": round(elapsed_s, 3),
+        "filter_s": round(output.filter_s, 3),
+        "smoother_s": round(output.smoother_s, 3),
         "counts": {
             "windows": len(output.track),
             "toas": len(labels),
             "labelled_beacon": int(labels["beacon_id"].notna().sum()),
             "labelled_clutter": int(labels["beacon_id"].isna().sum()),
             "resamples": output.n_resamples,
-            "warnings": len(loaded.warnings),
+            "ambiguous_windows": int(output.track["ambiguous"].sum()),
+            "warnings": len(loaded.warnings) + len(output.warnings),
         },
-        "warnings": list(loaded.warnings.messages),
+        "warnings": [*loaded.warnings.messages, *output.warnings],
     }

@@ -22,7 +22,7 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize, to_rgba
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from matplotlib.patches import Ellipse, Patch
+from matplotlib.patches import Patch, Polygon
 from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
@@ -30,12 +30,13 @@ from .atomic import atomic_path
 from .config import ModelConfig
 from .inputs import BeaconTable, FloatInfo
 from .model import predicted_arrivals
+from .posterior import ELLIPSE_95_SCALE
 
 FIGSIZE = (10.0, 6.0)
 DPI = 120
 KM_PER_DEG = 111.2
 MAX_BEACONS_ALL = 8  # show every beacon on the map when there are at most this many
-SD_CIRCLES = 12  # about this many +-1 sd circles along the track
+SD_CIRCLES = 12  # about this many uncertainty ellipses along the track
 CLUTTER_COLOR = "0.45"
 TIME_CMAP = "viridis"
 # tab20 without its greys (reserved for clutter): the ten strong hues, then the light ones.
@@ -165,32 +166,77 @@ def _sd_indices(times: NDArray[np.datetime64], step_days: float) -> NDArray[np.i
     return np.unique(np.searchsorted(days, marks))
 
 
-def _draw_sd_circles(
-    ax: Axes, times: NDArray, lat: NDArray, lon: NDArray, sd_km: NDArray, colors: NDArray
-) -> float | None:
-    """Draw +-1 sd circles every few days; return the spacing in days (None if none drawn)."""
-    if len(times) == 0 or not np.isfinite(sd_km).any():
+def _ellipse_polygon(lat: float, lon: float, smaj_km: float, smin_km: float, angle_deg: float) -> NDArray:
+    """The 95% ellipse as (lon, lat) vertices: built in km, mapped to degrees locally."""
+    phi = np.linspace(0.0, 2.0 * np.pi, 73)
+    theta = np.radians(angle_deg)  # major axis, clockwise from north
+    major, minor = np.array([np.sin(theta), np.cos(theta)]), np.array([np.cos(theta), -np.sin(theta)])
+    pts = ELLIPSE_95_SCALE * (
+        smaj_km * np.cos(phi)[:, None] * major[None, :] + smin_km * np.sin(phi)[:, None] * minor[None, :]
+    )
+    coslat = max(np.cos(np.radians(lat)), 0.05)
+    return np.column_stack([lon + pts[:, 0] / (KM_PER_DEG * coslat), lat + pts[:, 1] / KM_PER_DEG])
+
+
+def _draw_ellipses(ax: Axes, track: pd.DataFrame, times: NDArray, lat: NDArray, lon: NDArray, colors: NDArray):
+    """Draw the 95% ellipse every few days (a circle of radius 2 sd_km when the track has no
+    ellipse columns); return the spacing in days (None if none drawn)."""
+    sd = _column(track, "sd_km")
+    if "smaj_km" in track:
+        axes = np.column_stack([_column(track, "smaj_km"), _column(track, "smin_km"), _column(track, "angle_deg")])
+    else:
+        axes = np.column_stack([sd / np.sqrt(2.0), sd / np.sqrt(2.0), np.zeros_like(sd)])
+    if len(times) == 0 or not np.isfinite(axes[:, 0]).any():
         return None
     step = _sd_step_days((times[-1] - times[0]) / np.timedelta64(1, "D"))
     drawn = False
     for k in _sd_indices(times, step):
-        if not (np.isfinite(sd_km[k]) and np.isfinite(lat[k]) and np.isfinite(lon[k])):
+        if not (np.all(np.isfinite(axes[k])) and np.isfinite(lat[k]) and np.isfinite(lon[k])):
             continue
-        height = 2.0 * sd_km[k] / KM_PER_DEG
-        width = height / max(np.cos(np.radians(lat[k])), 0.05)
-        ax.add_patch(
-            Ellipse(
-                (lon[k], lat[k]),
-                width,
-                height,
-                facecolor=(*colors[k][:3], 0.25),
-                edgecolor=(0.0, 0.0, 0.0, 0.7),
-                lw=0.7,
-                zorder=3.5,
-            )
-        )
+        vertices = _ellipse_polygon(lat[k], lon[k], *axes[k])
+        ax.add_patch(Polygon(vertices, fc=(*colors[k][:3], 0.25), ec=(0.0, 0.0, 0.0, 0.7), lw=0.7, zorder=3.5))
         drawn = True
     return step if drawn else None
+
+
+def _draw_modes(ax: Axes, track: pd.DataFrame, modes: pd.DataFrame | None, ref_lon: float) -> bool:
+    """Ring the ambiguous positions and mark the second modes; True if any were drawn."""
+    if "ambiguous" not in track or not track["ambiguous"].any():
+        return False
+    amb = track[track["ambiguous"]]
+    ax.scatter(
+        _unwrap_lon(amb["lon"].to_numpy(), ref_lon),
+        amb["lat"],
+        s=40,
+        facecolors="none",
+        edgecolors="tab:red",
+        linewidths=0.8,
+        zorder=4.5,
+        label="ambiguous (reported mode)",
+    )
+    if modes is not None and len(modes):
+        second = modes[modes["mode"] == 2]
+        ax.scatter(
+            _unwrap_lon(second["lon"].to_numpy(), ref_lon),
+            second["lat"],
+            s=22,
+            marker="x",
+            c="tab:red",
+            linewidths=0.9,
+            zorder=4.5,
+            label="second mode",
+        )
+    return True
+
+
+def _ambiguous_spans(track: pd.DataFrame) -> list[tuple[np.datetime64, np.datetime64]]:
+    """Contiguous runs of ambiguous windows as (first, last) times."""
+    if "ambiguous" not in track or not len(track):
+        return []
+    flags = track["ambiguous"].to_numpy(dtype=bool)
+    times = _times(track)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(int), [0]])))
+    return [(times[a], times[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def _draw_beacons(ax: Axes, beacons: BeaconTable, keep: NDArray[np.bool_], ref_lon: float) -> None:
@@ -249,8 +295,10 @@ def plot_track(
     info: FloatInfo,
     path: Path,
     truth: pd.DataFrame | None = None,
+    modes: pd.DataFrame | None = None,
 ) -> Path:
-    """Map of the estimated track coloured by time, with beacons, fixes and optional truth."""
+    """Map of the estimated track coloured by time, with 95% ellipses, ambiguous positions and
+    their second modes, beacons, fixes and optional truth."""
     times = _times(track)
     lat, lon_raw = _column(track, "lat"), _column(track, "lon")
     ref_lon = _reference_lon(lon_raw, info.launch_lon)
@@ -266,9 +314,12 @@ def plot_track(
             colors = cmap(norm(tnum))
             ax.plot(lon, lat, "-", color="0.55", lw=0.8, zorder=2)
             ax.scatter(lon, lat, c=colors, s=10, zorder=3, label="estimated track")
-            step = _draw_sd_circles(ax, times, lat, lon, _column(track, "sd_km"), colors)
+            step = _draw_ellipses(ax, track, times, lat, lon, colors)
             if step is not None:
-                handles.append(Patch(fc=(*cmap(0.5)[:3], 0.25), ec="k", lw=0.7, label=f"±1 sd (every {step:g} d)"))
+                handles.append(
+                    Patch(fc=(*cmap(0.5)[:3], 0.25), ec="k", lw=0.7, label=f"95% ellipse (every {step:g} d)")
+                )
+            _draw_modes(ax, track, modes, ref_lon)
             if norm.vmax - norm.vmin > 1.0:  # a colour scale means nothing for one window
                 cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
                 _date_axis(cbar.ax.yaxis)
@@ -442,7 +493,8 @@ def _arrivals_title(info: FloatInfo, label_ids: NDArray[np.object_]) -> str:
 
 
 def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
-    """Posterior spread, stored TOAs per window and effective sample size against time."""
+    """Posterior spread, stored TOAs per window and effective sample size against time,
+    with ambiguous stretches shaded."""
     times = _times(track)
     with _figure() as fig:
         ax_sd, ax_n, ax_ess = fig.subplots(3, 1, sharex=True, height_ratios=[2.0, 1.0, 1.3])
@@ -454,8 +506,13 @@ def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
         ax_n.yaxis.set_major_locator(MaxNLocator(integer=True, nbins=4))
         ax_n.set_ylim(0, max(np.nanmax(n_sig, initial=0.0), 1.0) + 0.5)
         _line_panel(ax_ess, times, ess, "ESS (particles)", "tab:green", log=_wants_log(ess))
+        spans = _ambiguous_spans(track)
         for ax in (ax_sd, ax_n, ax_ess):
             ax.grid(True, lw=0.4, alpha=0.5)
+            for a, b in spans:
+                ax.axvspan(a - np.timedelta64(12, "h"), b + np.timedelta64(12, "h"), color="tab:red", alpha=0.15, lw=0)
+        if spans:
+            ax_sd.legend(handles=[Patch(color="tab:red", alpha=0.15, label="ambiguous (two modes)")], loc="upper right")
         if len(times):
             pad = max((times.max() - times.min()) * 0.01, np.timedelta64(12, "h"))
             ax_ess.set_xlim(times.min() - pad, times.max() + pad)
@@ -501,12 +558,13 @@ def write_plots(
     info: FloatInfo,
     model: ModelConfig,
     truth: pd.DataFrame | None = None,
+    modes: pd.DataFrame | None = None,
 ) -> list[Path]:
     """Write track.png, arrivals.png and uncertainty.png into `outdir`; return their paths."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     return [
-        plot_track(track, beacons, info, outdir / "track.png", truth=truth),
+        plot_track(track, beacons, info, outdir / "track.png", truth=truth, modes=modes),
         plot_arrivals(labels, track, beacons, info, model, outdir / "arrivals.png"),
         plot_uncertainty(track, outdir / "uncertainty.png"),
     ]

@@ -15,7 +15,7 @@ def normalise_log_weights(log_w: NDArray) -> tuple[NDArray[np.float64], float]:
 
 def ess(weights: NDArray) -> float:
     """Effective sample size 1 / sum W_p^2 of normalised weights."""
-    return float(1.0 / np.dot(weights, weights))
+    return float(1.0 / np.einsum("p,p->", weights, weights))  # no BLAS: thread-count independent
 
 
 def systematic(weights: NDArray, rng: np.random.Generator) -> NDArray[np.intp]:

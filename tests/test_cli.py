@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -33,16 +35,39 @@ def test_track_writes_every_output(mission_dir, tmp_path):
     assert result.exit_code == 0, result.output
     out = tmp_path / float_file.stem
     names = {p.name for p in out.iterdir()}
-    assert names == {"track.parquet", "labels.parquet", "run.json", "track.png", "arrivals.png", "uncertainty.png"}
+    assert names == {
+        "track.parquet",
+        "labels.parquet",
+        "modes.parquet",
+        "run.json",
+        "track.png",
+        "arrivals.png",
+        "uncertainty.png",
+    }
 
     track = pd.read_parquet(out / "track.parquet")
-    assert list(track.columns) == ["float_id", "time", "lat", "lon", "sd_km", "ess", "n_signals", "loglik"]
+    assert list(track.columns) == [
+        "float_id",
+        "time",
+        "lat",
+        "lon",
+        "sd_km",
+        "smaj_km",
+        "smin_km",
+        "angle_deg",
+        "ess",
+        "n_signals",
+        "loglik",
+        "ambiguous",
+        "second_mode_km",
+    ]
     assert str(track["time"].dtype) == "datetime64[ns, UTC]"
     labels = pd.read_parquet(out / "labels.parquet")
     assert list(labels.columns) == ["float_id", "time", "rank", "toa_s", "beacon_id", "prob", "p_clutter"]
 
     meta = read_metadata(out / "track.parquet")
     assert meta["method"] == "exact" and meta["config"]["filter"]["particles"] == 300
+    assert meta["estimate"] == "smoothed"
     run = json.loads((out / "run.json").read_text())
     assert run["counts"]["windows"] == len(track) and run["counts"]["toas"] == len(labels)
     assert set(run["inputs"]) == {"float_file", "beacons", "floats"}
@@ -69,6 +94,26 @@ def test_mission_config_and_flags_are_layered(mission_dir, tmp_path):
     run = json.loads((tmp_path / float_file.stem / "run.json").read_text())
     assert run["method"] == "unranked" and run["config"]["filter"]["particles"] == 120
     assert str(mission_dir / "rafostrack.toml") in run["config_files"]
+
+
+def test_no_smooth_and_also_filtered(mission_dir, tmp_path):
+    float_file = _float_file(mission_dir)
+    base = ["track", str(float_file), "--particles", "200", "--no-plots"]
+    result = CliRunner().invoke(main, [*base, "--out", str(tmp_path / "a"), "--also-filtered"])
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "a" / float_file.stem
+    assert read_metadata(out / "track.parquet")["estimate"] == "smoothed"
+    assert read_metadata(out / "track_filtered.parquet")["estimate"] == "filtered"
+    assert (out / "labels_filtered.parquet").exists()
+    result = CliRunner().invoke(main, [*base, "--out", str(tmp_path / "b"), "--no-smooth"])
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "b" / float_file.stem
+    assert read_metadata(out / "track.parquet")["estimate"] == "filtered"
+    assert not (out / "track_filtered.parquet").exists()
+    # The filtered estimate does not depend on whether the smoother runs after it.
+    a = pd.read_parquet(tmp_path / "a" / float_file.stem / "track_filtered.parquet")
+    b = pd.read_parquet(out / "track.parquet")
+    pd.testing.assert_frame_equal(a, b)
 
 
 def test_launch_override_without_floats_table(mission_dir, tmp_path):
@@ -103,7 +148,7 @@ def test_user_errors_are_one_line_and_exit_2(mission_dir, tmp_path, args, needle
 
 def test_console_script_runs(mission_dir, tmp_path):
     """The installed entry point, as a user runs it."""
-    exe = shutil.which("rafostrack", path=str(__import__("pathlib").Path(sys.executable).parent))
+    exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
     assert exe is not None
     float_file = _float_file(mission_dir)
     proc = subprocess.run(
@@ -114,3 +159,20 @@ def test_console_script_runs(mission_dir, tmp_path):
     )
     assert proc.returncode == 0, proc.stderr
     assert float_file.stem in proc.stdout
+
+
+def test_outputs_do_not_depend_on_the_thread_count(mission_dir, tmp_path):
+    """Same inputs and seed, 1 or 2 math-library threads: byte-identical Parquet files."""
+    exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
+    float_file = _float_file(mission_dir)
+    digests = []
+    for threads in ("1", "2"):
+        env = {
+            **os.environ,
+            **{k: threads for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")},
+        }
+        out = tmp_path / threads
+        args = [exe, "track", str(float_file), "--out", str(out), "--particles", "400", "--no-plots", "--also-filtered"]
+        subprocess.run(args, check=True, capture_output=True, env=env)
+        digests.append({p.name: p.read_bytes() for p in sorted((out / float_file.stem).glob("*.parquet"))})
+    assert digests[0] == digests[1]

@@ -27,18 +27,18 @@ MAX_SIGNALS = 12
 _TABLE_BUDGET = 8_000_000
 
 
-def _transitions(k: int) -> list[tuple[NDArray[np.intp], NDArray[np.intp]]]:
-    """For each signal j: the masks without bit j and the same masks with it."""
-    masks = np.arange(1 << k)
-    out = []
-    for j in range(k):
-        without = masks[(masks >> j) & 1 == 0]
-        out.append((without, without | (1 << j)))
-    return out
+def _split(table: NDArray, j: int, k: int) -> tuple[NDArray, NDArray]:
+    """Views of a (2^k, P) table on the masks without and with bit j (no copies)."""
+    view = table.reshape(1 << (k - 1 - j), 2, 1 << j, table.shape[-1])
+    return view[:, 0], view[:, 1]
 
 
-def associate(log_match: NDArray, log_unheard: NDArray) -> Association:
-    """Exact log Z and pair marginals (see module docstring); refuses K > 12."""
+def associate(log_match: NDArray, log_unheard: NDArray, *, marginals: bool = True) -> Association:
+    """Exact log Z and pair marginals (see module docstring); refuses K > 12.
+
+    `marginals=False` runs the forward pass only (a third of the cost) and returns NaN
+    marginals.
+    """
     n, s, k = log_match.shape
     if k > MAX_SIGNALS:
         raise InputError(
@@ -53,45 +53,47 @@ def associate(log_match: NDArray, log_unheard: NDArray) -> Association:
     p_match = np.empty((n, s, k))
     for lo in range(0, n, chunk):
         sl = slice(lo, min(n, lo + chunk))
-        log_z[sl], p_match[sl] = _associate_chunk(log_match[sl] - log_unheard[sl, :, None], k)
+        log_z[sl], p_match[sl] = _associate_chunk(log_match[sl] - log_unheard[sl, :, None], k, marginals)
     return Association(log_z + log_u_total, p_match)
 
 
-def _associate_chunk(log_w: NDArray, k: int) -> tuple[NDArray, NDArray]:
+def _associate_chunk(log_w: NDArray, k: int, marginals: bool) -> tuple[NDArray, NDArray]:
+    # Tables are (masks, particles): particles on the contiguous axis.
     n, s, _ = log_w.shape
-    w = np.exp(log_w)  # w_ij / u_i
-    moves = _transitions(k)
+    w = np.exp(np.moveaxis(log_w, 0, -1))  # (s, K, P): w_ij / u_i
     n_masks = 1 << k
 
-    fwd = np.zeros((s + 1, n, n_masks))
+    fwd = np.zeros((s + 1, n_masks, n))
     fwd_log = np.zeros((s + 1, n))
-    fwd[0, :, 0] = 1.0
+    fwd[0, 0] = 1.0
     for i in range(s):
-        cur, nxt = fwd[i], fwd[i + 1]
-        nxt[:] = cur
-        for j, (without, with_j) in enumerate(moves):
-            nxt[:, with_j] += cur[:, without] * w[:, i, j, None]
-        scale = nxt.max(axis=1)  # >= max of cur = 1: the unmatched option weighs 1
-        nxt /= scale[:, None]
+        nxt = fwd[i + 1]
+        nxt[:] = fwd[i]
+        for j in range(k):
+            _split(nxt, j, k)[1][...] += _split(fwd[i], j, k)[0] * w[i, j]
+        scale = nxt.max(axis=0)  # >= max of the previous table = 1: the unmatched option weighs 1
+        nxt /= scale
         fwd_log[i + 1] = fwd_log[i] + np.log(scale)
+    log_z = fwd_log[s] + np.log(fwd[s].sum(axis=0))
+    if not marginals:
+        return log_z, np.full((n, s, k), np.nan)
 
-    bwd = np.ones((s + 1, n, n_masks))
+    bwd = np.ones((s + 1, n_masks, n))
     bwd_log = np.zeros((s + 1, n))
     for i in range(s - 1, -1, -1):
-        cur, prv = bwd[i + 1], bwd[i]
-        prv[:] = cur
-        for j, (without, with_j) in enumerate(moves):
-            prv[:, without] += cur[:, with_j] * w[:, i, j, None]
-        scale = prv.max(axis=1)
-        prv /= scale[:, None]
+        prv = bwd[i]
+        prv[:] = bwd[i + 1]
+        for j in range(k):
+            _split(prv, j, k)[0][...] += _split(bwd[i + 1], j, k)[1] * w[i, j]
+        scale = prv.max(axis=0)
+        prv /= scale
         bwd_log[i] = bwd_log[i + 1] + np.log(scale)
 
-    log_z = fwd_log[s] + np.log(fwd[s].sum(axis=1))
     p_match = np.empty((n, s, k))
     with np.errstate(divide="ignore"):  # a pair no matching uses has probability exactly 0
         for i in range(s):
             log_rel = fwd_log[i] + bwd_log[i + 1] - log_z
-            for j, (without, with_j) in enumerate(moves):
-                pair = np.einsum("pm,pm->p", fwd[i][:, without], bwd[i + 1][:, with_j])
+            for j in range(k):
+                pair = (_split(fwd[i], j, k)[0] * _split(bwd[i + 1], j, k)[1]).sum(axis=(0, 1))
                 p_match[:, i, j] = np.exp(np.log(pair) + log_w[:, i, j] + log_rel)
     return log_z, p_match

@@ -1,0 +1,133 @@
+"""Per-window estimates from a filter run under a set of weights (filtered or smoothed).
+
+For each window: the position and its covariance ellipse, the spread, the ESS, whether
+the posterior has two separate modes, and each TOA's most probable label. Where the
+posterior is ambiguous (two modes), `lat`, `lon` and the ellipse describe the heavier
+mode (a position the float may really have had, not the point between the modes), `sd_km`
+the whole posterior, and both modes go to the modes table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from .config import AmbiguityConfig
+from .filter import FilterRun, ParticleFilter
+from .inputs import BeaconTable, Window
+from .posterior import two_modes
+from .resampling import ess
+
+TRACK_COLUMNS = (
+    "float_id",
+    "time",
+    "lat",
+    "lon",
+    "sd_km",
+    "smaj_km",
+    "smin_km",
+    "angle_deg",
+    "ess",
+    "n_signals",
+    "loglik",
+    "ambiguous",
+    "second_mode_km",
+)
+LABEL_COLUMNS = ("float_id", "time", "rank", "toa_s", "beacon_id", "prob", "p_clutter")
+MODE_COLUMNS = ("float_id", "time", "mode", "lat", "lon", "weight", "sd_km")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A float's track, labels and modes; `kind` is "filtered" or "smoothed"."""
+
+    kind: str
+    track: pd.DataFrame
+    labels: pd.DataFrame
+    modes: pd.DataFrame
+
+
+def label_rows(
+    float_id: str, window: Window, beacon_ids: NDArray, beacon_index: NDArray, probs: NDArray
+) -> list[tuple]:
+    """One row per TOA: the most probable of (each beacon, clutter) and its probability."""
+    rows = []
+    p_clutter = np.clip(1.0 - probs.sum(axis=0), 0.0, 1.0)
+    for j, toa in enumerate(window.toa_s):
+        best = int(np.argmax(probs[:, j])) if probs.shape[0] else -1
+        if best >= 0 and probs[best, j] > p_clutter[j]:
+            beacon, prob = beacon_ids[beacon_index[best]], float(probs[best, j])
+        else:
+            beacon, prob = None, float(p_clutter[j])
+        rows.append((float_id, window.time, j + 1, float(toa), beacon, prob, float(p_clutter[j])))
+    return rows
+
+
+def build_estimate(
+    run: FilterRun,
+    pf: ParticleFilter,
+    beacons: BeaconTable,
+    ambiguity: AmbiguityConfig,
+    smoothed_weights: Sequence[NDArray] | None = None,
+) -> Estimate:
+    """Tables for every window of `run`: filtered, or under `smoothed_weights` (one array per step)."""
+    track_rows, labels, modes_rows = [], [], []
+    weights_of = smoothed_weights if smoothed_weights is not None else [s.cloud.weights for s in run.steps]
+    for step, weights in zip(run.steps, weights_of, strict=True):
+        window = step.window
+        if window is None:  # the end fix: an observation, not an output row
+            continue
+        cloud = step.cloud
+        modes = two_modes(
+            cloud.lat,
+            cloud.lon,
+            weights,
+            min_weight=ambiguity.min_mode_weight,
+            min_separation_km=ambiguity.min_separation_km,
+            separation_factor=ambiguity.separation_factor,
+        )
+        position = modes.first if modes.ambiguous else modes.whole
+        smaj, smin, angle = position.ellipse()
+        track_rows.append(
+            (
+                run.float_id,
+                window.time,
+                position.lat,
+                position.lon,
+                modes.whole.sd_km,
+                smaj,
+                smin,
+                angle,
+                step.ess if smoothed_weights is None else ess(weights),
+                window.n_signals,
+                step.loglik,
+                modes.ambiguous,
+                modes.separation_km if modes.ambiguous else np.nan,
+            )
+        )
+        if modes.ambiguous:
+            for k, (g, w) in enumerate(((modes.first, modes.first_weight), (modes.second, modes.second_weight)), 1):
+                modes_rows.append((run.float_id, window.time, k, g.lat, g.lon, w, g.sd_km))
+        if smoothed_weights is None:
+            probs, index = step.label_probs, step.beacon_index
+        elif window.n_signals:
+            probs, index = pf.association_probs(cloud, weights, window)
+        else:
+            probs, index = np.zeros((0, 0)), np.zeros(0, dtype=np.intp)
+        labels.extend(label_rows(run.float_id, window, beacons.beacon_id, index, probs))
+    return Estimate(
+        kind="filtered" if smoothed_weights is None else "smoothed",
+        track=_frame(track_rows, TRACK_COLUMNS, {"n_signals": "int64", "ambiguous": "bool"}),
+        labels=_frame(labels, LABEL_COLUMNS, {"rank": "int64"}),
+        modes=_frame(modes_rows, MODE_COLUMNS, {"mode": "int64"}),
+    )
+
+
+def _frame(rows: list[tuple], columns: tuple[str, ...], dtypes: dict[str, str]) -> pd.DataFrame:
+    frame = pd.DataFrame(rows, columns=list(columns)).astype(dtypes)
+    frame["time"] = pd.to_datetime(frame["time"])
+    return frame
