@@ -15,7 +15,15 @@ from dataclasses import dataclass, field
 
 
 class InputError(Exception):
-    """A problem with user input; the message names the file, line or field."""
+    """A problem with user input; the message names the file, line or field.
+
+    The message is always one line: line breaks inside it (e.g. from a quoted bad value
+    or a parser's message) are replaced by spaces.
+    """
+
+    def __init__(self, message: str):
+        text = " ".join(str(message).splitlines()).strip()
+        super().__init__(text or "invalid input")
 
 
 def nearest(name: str, choices: Iterable[str]) -> str:
