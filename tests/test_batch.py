@@ -1,0 +1,375 @@
+"""`rafostrack batch`: discovery, incremental planning, failures, kill safety, locking, and
+identical outputs whatever the parallelism (local processes or a Dask cluster).
+
+The tree: 2 simulated missions (`m1`, `deep/m2`) x 3 floats of 12 days, 150 particles
+(`[filter] particles` in each mission's rafostrack.toml), no plots.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from rafostrack import batch as b
+from rafostrack.cli import main
+from rafostrack.config import load_config
+from rafostrack.simulate import simulate_mission, synthetic_scenario, write_mission
+
+MISSIONS = ("deep/m2", "m1")
+FLOATS = [(m, f"sim{i}") for m in MISSIONS for i in (1, 2, 3)]
+
+
+def _make_tree(root: Path) -> Path:
+    for i, name in enumerate(MISSIONS):
+        rng = np.random.default_rng(100 + i)
+        beacons, floats = synthetic_scenario(days=12, n_floats=3, rng=rng)
+        mission = simulate_mission(beacons, floats, load_config().model, rng)
+        write_mission(mission, root / name, {"filter": {"particles": 150}})
+    return root
+
+
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory) -> Path:
+    return _make_tree(tmp_path_factory.mktemp("tree") / "archive")
+
+
+@pytest.fixture(scope="module")
+def baseline(tree, tmp_path_factory) -> Path:
+    """The tree processed once with --jobs 1: the reference outputs."""
+    out = tmp_path_factory.mktemp("baseline")
+    result = _batch(tree, out, "--jobs", "1")
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.fixture
+def work_tree(tree, tmp_path) -> Path:
+    """A private copy of the tree, for tests that change inputs."""
+    return Path(shutil.copytree(tree, tmp_path / "archive"))
+
+
+def _batch(root: Path, out: Path, *args: str):
+    return CliRunner().invoke(main, ["batch", str(root), "--out", str(out), "--no-plots", *args])
+
+
+def _summary(out: Path) -> dict[tuple[str, str], dict[str, str]]:
+    with open(out / "batch-summary.csv", newline="") as fh:
+        return {(r["mission"], r["float_id"]): r for r in csv.DictReader(fh)}
+
+
+def _statuses(out: Path) -> dict[str, set[tuple[str, str]]]:
+    by: dict[str, set[tuple[str, str]]] = {"processed": set(), "skipped": set(), "failed": set()}
+    for key, row in _summary(out).items():
+        by[row["status"]].add(key)
+    return by
+
+
+def _complete(out: Path) -> set[tuple[str, str]]:
+    return {(m, f) for m, f in FLOATS if (out / m / f / b.MANIFEST).is_file()}
+
+
+def _parquet_bytes(out: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*.parquet"))}
+
+
+def _exe() -> str:
+    exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
+    assert exe is not None
+    return exe
+
+
+def _slow_config(tmp_path: Path) -> Path:
+    """More particles, so that a float takes long enough to be caught mid-run."""
+    cfg = tmp_path / "slow.toml"
+    cfg.write_text("[filter]\nparticles = 1000\n")
+    return cfg
+
+
+def _start(args: list[str], logs: Path) -> subprocess.Popen:
+    """`rafostrack ARGS` in the background, its output to files (not pipes: nothing can block)."""
+    with open(logs.with_suffix(".out"), "w") as out, open(logs.with_suffix(".err"), "w") as err:
+        return subprocess.Popen([_exe(), *args], stdout=out, stderr=err, stdin=subprocess.DEVNULL)
+
+
+def _wait_for(predicate, timeout: float, what: str, proc: subprocess.Popen | None = None) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if proc is not None and proc.poll() is not None:
+            pytest.fail(f"batch ended (code {proc.returncode}) before {what}")
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out waiting for {what}")
+        time.sleep(0.005)
+
+
+# --------------------------------------------------------------------------------------
+
+
+def test_discovery_mirrors_the_tree(tree, baseline):
+    missions = b.discover([tree])
+    assert [m.name for m in missions] == list(MISSIONS)  # truth/ subdirectories are not missions
+    assert all(sorted(m.rows) == ["sim1", "sim2", "sim3"] for m in missions)
+    assert _complete(baseline) == set(FLOATS)
+    for m, f in FLOATS:
+        names = {p.name for p in (baseline / m / f).iterdir()}
+        assert {"track.parquet", "labels.parquet", "run.json", b.MANIFEST} <= names
+    assert not list(baseline.rglob(".*tmp*")) and not (baseline / b.LOCK_NAME).exists()
+    assert (baseline / "batch.log").read_text().count("processed") >= 6
+
+
+def test_incremental_reprocesses_exactly_what_changed(work_tree, tmp_path):
+    out = tmp_path / "out"
+    result = _batch(work_tree, out)
+    assert result.exit_code == 0, result.output
+    assert _statuses(out)["processed"] == set(FLOATS)
+
+    result = _batch(work_tree, out)
+    assert result.exit_code == 0, result.output
+    assert _statuses(out)["skipped"] == set(FLOATS)
+    assert "6 skipped" in result.output
+
+    # One float file changes (a duplicated row: same data, other bytes): that float only.
+    float_file = work_tree / "m1" / "sim2.csv"
+    lines = float_file.read_text().splitlines(keepends=True)
+    float_file.write_text("".join([*lines, lines[-1]]))
+    result = _batch(work_tree, out)
+    assert result.exit_code == 0, result.output
+    summary = _summary(out)
+    assert _statuses(out)["processed"] == {("m1", "sim2")}
+    assert summary["m1", "sim2"]["reason"] == "float file changed"
+
+    # beacons.csv changes (rows reordered): its whole mission, not the other one.
+    beacons = work_tree / "deep" / "m2" / "beacons.csv"
+    header, first, second, *rest = beacons.read_text().splitlines(keepends=True)
+    beacons.write_text("".join([header, second, first, *rest]))
+    result = _batch(work_tree, out)
+    assert result.exit_code == 0, result.output
+    assert _statuses(out)["processed"] == {("deep/m2", f) for f in ("sim1", "sim2", "sim3")}
+    assert _summary(out)["deep/m2", "sim1"]["reason"] == "beacons.csv changed"
+
+    # One row of floats.csv changes: that float only, although the file's bytes changed.
+    floats = work_tree / "m1" / "floats.csv"
+    rows = list(csv.reader(floats.read_text().splitlines()))
+    col = rows[0].index("window_s")
+    row = next(r for r in rows if r[0] == "sim3")
+    row[col] = row[col] + ".0"
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rows)
+    floats.write_text(buf.getvalue())
+    result = _batch(work_tree, out)
+    assert result.exit_code == 0, result.output
+    assert _statuses(out)["processed"] == {("m1", "sim3")}
+    assert _summary(out)["m1", "sim3"]["reason"] == "floats.csv row changed"
+
+    # The effective config changes (a flag): every float; --force redoes everything.
+    result = _batch(work_tree, out, "--method", "unranked")
+    assert result.exit_code == 0, result.output
+    assert _statuses(out)["processed"] == set(FLOATS)
+    assert _summary(out)["m1", "sim1"]["reason"] == "config changed"
+    result = _batch(work_tree, out, "--method", "unranked", "--force", "--jobs", "2")
+    assert result.exit_code == 0, result.output
+    assert _statuses(out)["processed"] == set(FLOATS)
+    assert _summary(out)["m1", "sim1"]["reason"] == "forced"
+
+
+def test_a_corrupt_float_fails_alone(work_tree, tmp_path):
+    (work_tree / "m1" / "sim2.csv").write_text("time,toa_s\n2010-01-01T00:00:00Z,12.5\n2010-01-02T00:00:00Z,abc\n")
+    (work_tree / "deep" / "m2" / "sim4.csv").write_text("time,toa_s\n")  # not in floats.csv: ignored
+    out = tmp_path / "out"
+    result = _batch(work_tree, out, "--jobs", "2")
+    assert result.exit_code == 1, result.output
+    statuses = _statuses(out)
+    assert statuses["failed"] == {("m1", "sim2")}
+    assert statuses["processed"] == set(FLOATS) - {("m1", "sim2")}
+    reason = _summary(out)["m1", "sim2"]["reason"]
+    assert "sim2.csv: line 3: field 'toa_s'" in reason and "abc" in reason
+    assert reason in result.output  # in the printed table too
+    assert "Traceback" not in result.output
+    assert not (out / "m1" / "sim2").exists()
+    assert "sim4.csv (no row in floats.csv)" in (out / "batch.log").read_text()
+
+
+def test_an_unreadable_floats_table_fails_its_mission_only(work_tree, tmp_path):
+    (work_tree / "m1" / "floats.csv").write_text("float;launch\n")
+    out = tmp_path / "out"
+    result = _batch(work_tree, out)
+    assert result.exit_code == 1, result.output
+    statuses = _statuses(out)
+    assert statuses["failed"] == {("m1", f) for f in ("sim1", "sim2", "sim3")}
+    assert statuses["processed"] == {("deep/m2", f) for f in ("sim1", "sim2", "sim3")}
+    assert "separated by ';'" in _summary(out)["m1", "sim1"]["reason"]
+
+
+def test_jobs_2_gives_the_same_bytes_as_jobs_1(tree, baseline, tmp_path):
+    out = tmp_path / "out"
+    result = _batch(tree, out, "--jobs", "2")
+    assert result.exit_code == 0, result.output
+    ours, ref = _parquet_bytes(out), _parquet_bytes(baseline)
+    assert len(ref) >= 12 and ours.keys() == ref.keys()
+    assert all(ours[k] == ref[k] for k in ref)
+
+
+def test_dask_gives_the_same_bytes_as_local(tree, baseline, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    out = tmp_path / "out"
+    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1, dashboard_address=None) as cluster:
+        result = _batch(tree, out, "--scheduler", cluster.scheduler_address)
+    assert result.exit_code == 0, result.output
+    assert "Dask scheduler" in (out / "batch.log").read_text()
+    assert _statuses(out)["processed"] == set(FLOATS)
+    ours, ref = _parquet_bytes(out), _parquet_bytes(baseline)
+    assert ours.keys() == ref.keys()
+    assert all(ours[k] == ref[k] for k in ref)
+
+
+def test_local_workers_run_math_libraries_single_threaded(monkeypatch):
+    """BLAS results depend on the thread count: every worker uses one, whatever --jobs."""
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    names = ["OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"] * 2
+    assert list(b.run_local(names, 2, fn=os.getenv)) == ["1"] * 4
+    assert "OPENBLAS_NUM_THREADS" not in os.environ  # the batch process itself is left alone
+
+
+def test_sigkill_leaves_no_partial_output_and_a_rerun_finishes(work_tree, tmp_path):
+    out = tmp_path / "out"
+    cfg = _slow_config(tmp_path)
+    args = ["batch", str(work_tree), "--out", str(out), "--jobs", "1", "--no-plots", "--config", str(cfg)]
+    proc = _start(args, tmp_path / "killed")
+    try:
+        _wait_for(lambda: len(_complete(out)) >= 1, 60, "a first complete float", proc)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    time.sleep(0.3)  # its worker dies with it (it watches a pipe from the batch process)
+    done = _complete(out)
+    assert 1 <= len(done) < len(FLOATS), "the run was not caught mid-way"
+    assert (out / b.LOCK_NAME).exists()  # left behind by the killed run
+
+    for path in out.rglob("*.parquet"):  # everything written so far reads back in full
+        pq.read_table(path)
+    visible = {(m, p.name) for m in MISSIONS if (out / m).is_dir() for p in (out / m).iterdir()}
+    visible = {v for v in visible if not v[1].startswith(".")}
+    assert visible == done  # no float directory is visible before it is complete
+
+    result = CliRunner().invoke(
+        main, ["batch", str(work_tree), "--out", str(out), "--no-plots", "--config", str(cfg), "--jobs", "2"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "taking over a stale lock" in result.output
+    statuses = _statuses(out)
+    assert statuses["skipped"] == done
+    assert statuses["processed"] == set(FLOATS) - done
+    assert _complete(out) == set(FLOATS)
+    assert not [p for p in out.rglob(".*") if p.name != ".rafostrack-batch.lock.guard"]
+    for path in out.rglob("*.parquet"):
+        pq.read_table(path)
+
+
+def test_a_second_concurrent_run_does_not_write(work_tree, tmp_path):
+    out = tmp_path / "out"
+    cfg = _slow_config(tmp_path)
+    args = ["batch", str(work_tree), "--out", str(out), "--no-plots", "--config", str(cfg)]
+    first = _start(args, tmp_path / "first")
+    try:
+        _wait_for(lambda: (out / b.LOCK_NAME).is_file(), 60, "the first run's lock", first)
+        second = _batch(work_tree, out, "--config", str(cfg))
+        assert first.poll() is None, "the first run ended too soon for this test"
+        assert second.exit_code == 2, second.output
+        assert "another batch run" in second.output and f"pid {first.pid}" in second.output
+        assert not (out / "batch-summary.csv").exists()  # the second run wrote nothing
+        first.wait(timeout=120)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert first.returncode == 0, (tmp_path / "first.err").read_text()
+    assert "6 processed" in (tmp_path / "first.out").read_text()
+    assert _complete(out) == set(FLOATS) and not (out / b.LOCK_NAME).exists()
+
+
+def test_stale_lock_and_temporaries_are_cleaned(tree, baseline, tmp_path):
+    out = Path(shutil.copytree(baseline, tmp_path / "out"))
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    lock = {"pid": dead.pid, "host": socket.gethostname(), "started": "2020-01-01T00:00:00+00:00"}
+    (out / b.LOCK_NAME).write_text(json.dumps(lock))
+    (out / "m1" / ".sim1.tmp-123").mkdir()
+    (out / "m1" / ".sim1.tmp-123" / "track.parquet").write_bytes(b"PAR1 truncated")
+    (out / "deep" / "m2" / ".sim3.trash-77").mkdir()
+    (out / ".batch.log.x1y2.tmp").write_text("partial")
+    result = _batch(tree, out)
+    assert result.exit_code == 0, result.output
+    assert f"taking over a stale lock {out / b.LOCK_NAME} (pid {dead.pid}" in result.output
+    assert not (out / "m1" / ".sim1.tmp-123").exists() and not (out / "deep" / "m2" / ".sim3.trash-77").exists()
+    assert not (out / ".batch.log.x1y2.tmp").exists()
+    assert _statuses(out)["skipped"] == set(FLOATS)  # outputs are relocatable: paths are not hashed
+    assert not (out / b.LOCK_NAME).exists()
+
+
+def test_a_live_lock_is_respected(tree, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "started": "now", "proc_start": b._proc_start(os.getpid())}
+    (out / b.LOCK_NAME).write_text(json.dumps(me))
+    result = _batch(tree, out)
+    assert result.exit_code == 2
+    assert "another batch run" in result.output and "not starting" in result.output
+    assert json.loads((out / b.LOCK_NAME).read_text()) == me  # untouched
+    assert sorted(p.name for p in out.iterdir()) == [b.LOCK_NAME]
+
+
+@pytest.mark.parametrize(
+    ("make", "needle"),
+    [
+        (lambda p: p, "no mission directories under"),
+        (lambda p: p / "missing", "not a directory"),
+    ],
+)
+def test_usage_errors_exit_2(tmp_path, make, needle):
+    result = _batch(make(tmp_path), tmp_path / "out")
+    assert result.exit_code == 2
+    assert needle in result.output and "Traceback" not in result.output
+
+
+def test_bad_config_and_jobs_are_usage_errors(tree, tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[filter]\nparticels = 3\n")
+    result = _batch(tree, tmp_path / "out", "--config", str(bad))
+    assert result.exit_code == 2 and "did you mean 'particles'" in result.output
+    result = _batch(tree, tmp_path / "out", "--jobs", "0")
+    assert result.exit_code == 2
+    assert not (tmp_path / "out").exists()
+
+
+def test_progress_bar_on_a_terminal_and_lines_otherwise():
+    outcomes = [
+        b.FloatOutcome("m1", "sim1", b.PROCESSED, "new", seconds=1.0, warnings=0),
+        b.FloatOutcome("m1", "sim2", b.FAILED, "sim2.csv: line 3: bad"),
+    ]
+    tty, plain = io.StringIO(), io.StringIO()
+    for stream, is_tty in ((tty, True), (plain, False)):
+        reporter = b.Reporter(stream, tty=is_tty)
+        reporter.start(2)
+        for outcome in outcomes:
+            reporter.done(outcome)
+        reporter.finish()
+    assert "\r[" in tty.getvalue() and "2/2" in tty.getvalue()
+    assert "m1/sim2 failed: sim2.csv: line 3: bad\n" in tty.getvalue()
+    assert "\r" not in plain.getvalue()
+    assert plain.getvalue().splitlines() == [
+        "rafostrack batch: [1/2] m1/sim1 processed in 1.0 s (new)",
+        "rafostrack batch: [2/2] m1/sim2 failed: sim2.csv: line 3: bad",
+    ]
