@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/accuracy.py
 	$(BIN)/python benchmarks/engines.py
 	$(BIN)/python benchmarks/speed.py
+	$(BIN)/python benchmarks/batch.py
 
 sample: $(STAMP)
 	$(BIN)/python scripts/make_sample.py data/samples
