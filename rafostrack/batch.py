@@ -53,6 +53,7 @@ from . import __version__
 from .config import load_config
 from .errors import InputError
 from .outputs import file_digest, write_json
+from .workers import single_threaded_math
 
 MANIFEST = "batch-manifest.json"
 LOCK_NAME = ".rafostrack-batch.lock"
@@ -440,29 +441,6 @@ def _mp_context() -> multiprocessing.context.BaseContext:
     return multiprocessing.get_context()
 
 
-_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
-
-
-@contextlib.contextmanager
-def _single_threaded_math() -> Iterator[None]:
-    """While worker processes start, set the math libraries (BLAS, OpenMP) to one thread
-    unless the user set them, as Dask workers do: `jobs` workers that each start a thread per
-    core oversubscribe the machine and run slower than one; and a BLAS reduction's result
-    depends on its thread count, so one thread everywhere keeps outputs byte-identical for
-    every --jobs and between local and Dask workers."""
-    saved = {name: os.environ.get(name) for name in _THREAD_VARS}
-    for name in _THREAD_VARS:
-        os.environ.setdefault(name, "1")
-    try:
-        yield
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
-
-
 def run_local(tasks: Sequence[Any], jobs: int, fn: Callable[[Any], Any] = process_float) -> Iterator[Any]:
     """Run `fn` (`process_float`) over `tasks` in `jobs` worker processes, yielding outcomes as
     they finish. A worker that dies (killed, out of memory) fails the floats still unfinished."""
@@ -475,7 +453,7 @@ def run_local(tasks: Sequence[Any], jobs: int, fn: Callable[[Any], Any] = proces
         with ProcessPoolExecutor(
             max_workers=workers, mp_context=ctx, initializer=_worker_init, initargs=(lifeline,)
         ) as pool:
-            with _single_threaded_math():
+            with single_threaded_math():
                 if ctx.get_start_method() == "forkserver":  # workers inherit the server's environment
                     from multiprocessing import forkserver
 

@@ -127,6 +127,12 @@ def build_estimate(
     )
 
 
+def runs_of(times: NDArray[np.datetime64], flags: NDArray[np.bool_]) -> list[tuple[np.datetime64, np.datetime64]]:
+    """Maximal stretches of consecutive flagged windows (e.g. ambiguous ones), as (first, last) times."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(flags, dtype=int), [0]])))
+    return [(times[a], times[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
 def _frame(rows: list[tuple], columns: tuple[str, ...], dtypes: dict[str, str]) -> pd.DataFrame:
     frame = pd.DataFrame(rows, columns=list(columns)).astype(dtypes)
     frame["time"] = pd.to_datetime(frame["time"])

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from .atomic import atomic_path
 from .config import ModelConfig
+from .estimates import runs_of
 from .inputs import BeaconTable, FloatInfo
 from .model import predicted_arrivals
 from .posterior import ELLIPSE_95_SCALE
@@ -50,9 +51,9 @@ Color = tuple[float, float, float, float]
 
 
 @contextlib.contextmanager
-def _figure() -> Iterator[Figure]:
-    """A fresh Agg-backed figure with constrained layout, cleared on exit."""
-    fig = Figure(figsize=FIGSIZE, dpi=DPI, layout="constrained")
+def figure(width: float = FIGSIZE[0], height: float = FIGSIZE[1], dpi: int = DPI) -> Iterator[Figure]:
+    """A fresh Agg-backed figure (no pyplot state) with constrained layout, cleared on exit."""
+    fig = Figure(figsize=(width, height), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
     try:
         yield fig
@@ -60,11 +61,11 @@ def _figure() -> Iterator[Figure]:
         fig.clear()
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    """Write `fig` as a PNG to `path` atomically."""
+def save_png(fig: Figure, path: Path) -> Path:
+    """Write `fig` as a PNG (at the figure's dpi) to `path` atomically."""
     path = Path(path)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=DPI)
+        fig.savefig(tmp, format="png", dpi=fig.dpi)
     return path
 
 
@@ -74,7 +75,7 @@ def beacon_colors(ids: Sequence[str]) -> dict[str, Color]:
     return {b: cmap(_TAB20_ORDER[k % len(_TAB20_ORDER)]) for k, b in enumerate(ids)}
 
 
-def _date_axis(axis: Axis) -> None:
+def date_axis(axis: Axis) -> None:
     """Concise automatic date ticks on `axis`."""
     locator = mdates.AutoDateLocator()
     axis.set_major_locator(locator)
@@ -229,16 +230,6 @@ def _draw_modes(ax: Axes, track: pd.DataFrame, modes: pd.DataFrame | None, ref_l
     return True
 
 
-def _ambiguous_spans(track: pd.DataFrame) -> list[tuple[np.datetime64, np.datetime64]]:
-    """Contiguous runs of ambiguous windows as (first, last) times."""
-    if "ambiguous" not in track or not len(track):
-        return []
-    flags = track["ambiguous"].to_numpy(dtype=bool)
-    times = _times(track)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(int), [0]])))
-    return [(times[a], times[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)]
-
-
 def _draw_beacons(ax: Axes, beacons: BeaconTable, keep: NDArray[np.bool_], ref_lon: float) -> None:
     """Beacons as black triangles labelled with their ids."""
     if not keep.any():
@@ -304,7 +295,7 @@ def plot_track(
     ref_lon = _reference_lon(lon_raw, info.launch_lon)
     lon = _unwrap_lon(lon_raw, ref_lon)
     mean_lat = float(np.nanmean(lat)) if np.isfinite(lat).any() else info.launch_lat
-    with _figure() as fig:
+    with figure() as fig:
         ax = fig.add_subplot()
         handles: list[object] = []
         if len(times):
@@ -322,7 +313,7 @@ def plot_track(
             _draw_modes(ax, track, modes, ref_lon)
             if norm.vmax - norm.vmin > 1.0:  # a colour scale means nothing for one window
                 cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
-                _date_axis(cbar.ax.yaxis)
+                date_axis(cbar.ax.yaxis)
         else:
             _note(ax, "no track estimate")
         if truth is not None and len(truth):
@@ -348,7 +339,7 @@ def plot_track(
             ncols=min(len(all_handles), 4),
         )
         ax.set_title(f"Float {info.float_id}: estimated track" + _span_text(times))
-        return _save(fig, path)
+        return save_png(fig, path)
 
 
 def _span_text(times: NDArray[np.datetime64]) -> str:
@@ -410,7 +401,7 @@ def plot_arrivals(
     counts = pd.Series(label_ids[~clutter]).value_counts().to_dict()
     ptimes, pred = _predicted(track, beacons, info, model)
     shown = _beacons_to_show(ids, counts, pred, info.window_s)
-    with _figure() as fig:
+    with figure() as fig:
         ax = fig.add_subplot()
         handles: list[Line2D] = []
         marker = "_" if len(ptimes) == 1 else ""  # a one-point curve is drawn as a tick
@@ -430,7 +421,7 @@ def plot_arrivals(
         ax.set_title(_arrivals_title(info, label_ids))
         if handles:
             _arrivals_legend(fig, handles)
-        return _save(fig, path)
+        return save_png(fig, path)
 
 
 def _arrivals_legend(fig: Figure, handles: list[Line2D]) -> None:
@@ -475,7 +466,7 @@ def _arrivals_axes(ax: Axes, info: FloatInfo, ltimes: NDArray, ptimes: NDArray) 
     else:  # nothing to place in time: show the float's deployment
         end = info.end_time if info.has_end_fix else info.launch_time + np.timedelta64(1, "D")
         ax.set_xlim(info.launch_time, end)
-    _date_axis(ax.xaxis)
+    date_axis(ax.xaxis)
 
 
 def _arrivals_title(info: FloatInfo, label_ids: NDArray[np.object_]) -> str:
@@ -496,7 +487,7 @@ def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
     """Posterior spread, stored TOAs per window and effective sample size against time,
     with ambiguous stretches shaded."""
     times = _times(track)
-    with _figure() as fig:
+    with figure() as fig:
         ax_sd, ax_n, ax_ess = fig.subplots(3, 1, sharex=True, height_ratios=[2.0, 1.0, 1.3])
         sd, n_sig, ess = _column(track, "sd_km"), _column(track, "n_signals"), _column(track, "ess")
         _line_panel(ax_sd, times, sd, "posterior sd (km)", "tab:blue")
@@ -506,7 +497,7 @@ def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
         ax_n.yaxis.set_major_locator(MaxNLocator(integer=True, nbins=4))
         ax_n.set_ylim(0, max(np.nanmax(n_sig, initial=0.0), 1.0) + 0.5)
         _line_panel(ax_ess, times, ess, "ESS (particles)", "tab:green", log=_wants_log(ess))
-        spans = _ambiguous_spans(track)
+        spans = runs_of(_times(track), track["ambiguous"].to_numpy(dtype=bool)) if "ambiguous" in track else []
         for ax in (ax_sd, ax_n, ax_ess):
             ax.grid(True, lw=0.4, alpha=0.5)
             for a, b in spans:
@@ -516,7 +507,7 @@ def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
         if len(times):
             pad = max((times.max() - times.min()) * 0.01, np.timedelta64(12, "h"))
             ax_ess.set_xlim(times.min() - pad, times.max() + pad)
-            _date_axis(ax_ess.xaxis)
+            date_axis(ax_ess.xaxis)
         else:
             for ax in (ax_sd, ax_n, ax_ess):
                 ax.set_xticks([])
@@ -524,7 +515,7 @@ def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
             _note(ax_sd, "no track estimate")
         fid = _float_id(track)
         ax_sd.set_title(f"Float {fid}: posterior uncertainty" if fid else "Posterior uncertainty")
-        return _save(fig, path)
+        return save_png(fig, path)
 
 
 def _line_panel(ax: Axes, times: NDArray, values: NDArray, ylabel: str, color: str, log: bool = False) -> None:

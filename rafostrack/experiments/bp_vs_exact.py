@@ -28,6 +28,7 @@ import pandas as pd
 from .. import model as m
 from ..engines import bp, exact
 from ..motion import scatter
+from ..plots import save_png
 from ..resampling import normalise_log_weights
 from .common import (
     CLUTTER_LEVELS,
@@ -39,7 +40,6 @@ from .common import (
     pmap,
     resolve_sizes,
     save_csv,
-    save_png,
     save_summary,
 )
 

@@ -19,7 +19,7 @@ import math
 import multiprocessing
 import os
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,18 +27,20 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from ..atomic import atomic_path, write_text_atomic
+from .. import plots
+from ..atomic import write_text_atomic
 from ..config import Config, load_config, with_overrides
 from ..evaluate import position_errors_km
 from ..geodesy import displace, local_offsets_km
 from ..inputs import ArrivalRecord, BeaconTable, FloatInfo
 from ..outputs import write_json
+from ..plots import save_png
 from ..simulate import simulate_arrivals
 from ..tracker import TrackOutput, track_record
+from ..workers import single_threaded_math
 
 T0 = np.datetime64("2010-01-01T00:00:00", "ns")
 ONE_DAY = np.timedelta64(86400, "s").astype("timedelta64[ns]")
@@ -279,10 +281,6 @@ def run_method(
     return MethodRun(method, out, err_f, err_s, out.filter_s + out.smoother_s)
 
 
-def rmse_km(track: pd.DataFrame, truth: pd.DataFrame) -> float:
-    return float(np.sqrt(np.mean(position_errors_km(track, truth) ** 2)))
-
-
 def pmap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int = DEFAULT_WORKERS) -> list[Any]:
     """`[fn(t) for t in tasks]`, in `workers` processes when > 1 (order kept). Every task
     carries its own seed, so results do not depend on scheduling. Workers are spawned with
@@ -291,28 +289,12 @@ def pmap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int = DEFAULT_
     if workers <= 1 or len(tasks) <= 1:
         return [fn(t) for t in tasks]
     with (
-        _single_threaded_blas(),
+        single_threaded_math(),
         ProcessPoolExecutor(
             max_workers=min(workers, len(tasks)), mp_context=multiprocessing.get_context("spawn")
         ) as pool,
     ):
         return list(pool.map(fn, tasks))
-
-
-@contextlib.contextmanager
-def _single_threaded_blas() -> Iterator[None]:
-    """Set the BLAS/OpenMP thread counts to 1 in the environment (inherited by spawned workers)."""
-    names = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-    saved = {k: os.environ.get(k) for k in names}
-    os.environ.update({k: "1" for k in names})
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
 
 
 def mean_se(values: Iterable[float]) -> tuple[float, float]:
@@ -327,19 +309,6 @@ def mean_se(values: Iterable[float]) -> tuple[float, float]:
 def true_signal_counts(record: ArrivalRecord) -> NDArray[np.int64]:
     """Stored TOAs per window that came from a beacon (by the record's known labels)."""
     return np.array([sum(b is not None for b in (w.beacon_id or ())) for w in record.windows], dtype=np.int64)
-
-
-def runs_of(times: NDArray[np.datetime64], flag: NDArray[np.bool_]) -> list[tuple[np.datetime64, np.datetime64]]:
-    """Maximal stretches of consecutive flagged entries, as (first time, last time)."""
-    out, start = [], None
-    for k, f in enumerate(flag):
-        if f and start is None:
-            start = k
-        if start is not None and (not f or k == len(flag) - 1):
-            stop = k if f else k - 1
-            out.append((times[start], times[stop]))
-            start = None
-    return out
 
 
 def day_text(t: np.datetime64) -> str:
@@ -359,21 +328,9 @@ def span_text(spans: Sequence[tuple[np.datetime64, np.datetime64]], limit: int =
 # Output
 
 
-@contextlib.contextmanager
-def figure(width: float, height: float) -> Iterator[Figure]:
-    """A fresh Agg-backed figure (no pyplot state) with constrained layout."""
-    fig = Figure(figsize=(width, height), dpi=DPI, layout="constrained")
-    FigureCanvasAgg(fig)
-    try:
-        yield fig
-    finally:
-        fig.clear()
-
-
-def save_png(fig: Figure, path: Path) -> Path:
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=DPI)
-    return Path(path)
+def figure(width: float, height: float) -> contextlib.AbstractContextManager[Figure]:
+    """A fresh Agg-backed figure of the experiments' size and resolution."""
+    return plots.figure(width, height, dpi=DPI)
 
 
 def save_csv(frame: pd.DataFrame, path: Path) -> Path:
@@ -642,12 +599,3 @@ def _draw_trajectory(
             fontsize=10,
         )
         save_png(fig, path)
-
-
-def date_axis(axis: Any) -> None:
-    """Concise automatic date ticks."""
-    import matplotlib.dates as mdates
-
-    locator = mdates.AutoDateLocator()
-    axis.set_major_locator(locator)
-    axis.set_major_formatter(mdates.ConciseDateFormatter(locator))

@@ -24,18 +24,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..estimates import runs_of
 from ..evaluate import position_errors_km
 from ..geodesy import local_offsets_km
+from ..plots import date_axis, save_png
 from .common import (
     DEFAULT_WORKERS,
     cli,
-    date_axis,
     figure,
     pmap,
     resolve_sizes,
-    runs_of,
     save_csv,
-    save_png,
     save_summary,
     span_text,
     true_signal_counts,

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..plots import save_png
 from .common import (
     CLUTTER_LEVELS,
     DEFAULT_WORKERS,
@@ -36,7 +37,6 @@ from .common import (
     resolve_sizes,
     run_method,
     save_csv,
-    save_png,
     save_summary,
 )
 

@@ -24,18 +24,17 @@ from ..config import with_overrides
 from ..evaluate import association_accuracy, position_errors_km
 from ..inputs import ArrivalRecord
 from ..pipeline import TrackInputs, load_float
+from ..plots import date_axis, save_png
 from ..tracker import TrackOutput, track_record
 from .common import (
     DEFAULT_WORKERS,
     ONE_DAY,
     SAMPLES,
     cli,
-    date_axis,
     figure,
     pmap,
     resolve_sizes,
     save_csv,
-    save_png,
     save_summary,
 )
 
