@@ -470,7 +470,7 @@ def build_report(
         + ". Every run is seeded: the same command gives the same numbers."
         + (" **Quick mode: few repeats and particles; numbers are indicative only.**" if quick else ""),
         "",
-        "Paper: Ozdemir et al., ranked-signals tracking (`ranked-signals-tracking_main.txt` section 3, appendix "
+        "Paper: the ranked-signal tracking paper (`ranked-signals-tracking_main.txt` section 3, appendix "
         "A.3). The paper gives its figures without numbers; its claims are qualitative and are quoted beside ours.",
         "",
         "**The paper's setting on rafostrack** (Figs. 4, 5, 6b and the BP panel): " + PaperSetting().describe() + ". "
