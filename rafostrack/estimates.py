@@ -9,7 +9,7 @@ the whole posterior, and both modes go to the modes table.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +17,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from .config import AmbiguityConfig
-from .filter import FilterRun, ParticleFilter
+from .filter import ParticleFilter, Step
 from .inputs import BeaconTable, Window
 from .posterior import two_modes
 from .resampling import ess
@@ -68,16 +68,20 @@ def label_rows(
 
 
 def build_estimate(
-    run: FilterRun,
+    float_id: str,
+    steps: Iterable[Step],
     pf: ParticleFilter,
     beacons: BeaconTable,
     ambiguity: AmbiguityConfig,
     smoothed_weights: Sequence[NDArray] | None = None,
 ) -> Estimate:
-    """Tables for every window of `run`: filtered, or under `smoothed_weights` (one array per step)."""
+    """Tables for every window among `steps`: filtered (each step's own weights; `steps` may
+    be a stream), or under `smoothed_weights` (one array per step)."""
     track_rows, labels, modes_rows = [], [], []
-    weights_of = smoothed_weights if smoothed_weights is not None else [s.cloud.weights for s in run.steps]
-    for step, weights in zip(run.steps, weights_of, strict=True):
+    pairs = (
+        ((s, s.cloud.weights) for s in steps) if smoothed_weights is None else zip(steps, smoothed_weights, strict=True)
+    )
+    for step, weights in pairs:
         window = step.window
         if window is None:  # the end fix: an observation, not an output row
             continue
@@ -94,7 +98,7 @@ def build_estimate(
         smaj, smin, angle = position.ellipse()
         track_rows.append(
             (
-                run.float_id,
+                float_id,
                 window.time,
                 position.lat,
                 position.lon,
@@ -111,14 +115,14 @@ def build_estimate(
         )
         if modes.ambiguous:
             for k, (g, w) in enumerate(((modes.first, modes.first_weight), (modes.second, modes.second_weight)), 1):
-                modes_rows.append((run.float_id, window.time, k, g.lat, g.lon, w, g.sd_km))
+                modes_rows.append((float_id, window.time, k, g.lat, g.lon, w, g.sd_km))
         if smoothed_weights is None:
             probs, index = step.label_probs, step.beacon_index
         elif window.n_signals:
             probs, index = pf.association_probs(cloud, weights, window)
         else:
             probs, index = np.zeros((0, 0)), np.zeros(0, dtype=np.intp)
-        labels.extend(label_rows(run.float_id, window, beacons.beacon_id, index, probs))
+        labels.extend(label_rows(float_id, window, beacons.beacon_id, index, probs))
     return Estimate(
         kind="filtered" if smoothed_weights is None else "smoothed",
         track=_frame(track_rows, TRACK_COLUMNS, {"n_signals": "int64", "ambiguous": "bool"}),

@@ -15,7 +15,7 @@ eq. 20).
 from __future__ import annotations
 
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import partial
 
@@ -119,6 +119,7 @@ class ParticleFilter:
         self.engine = engine_for(config)
         self._beacon_row = beacons.index_of()
         self.warnings: list[str] = []
+        self.n_resamples = 0
 
     def _warn(self, message: str) -> None:
         self.warnings.append(message)
@@ -197,7 +198,14 @@ class ParticleFilter:
         return self.info.end_time if use else None
 
     def run(self, record: ArrivalRecord, rng: np.random.Generator) -> FilterRun:
-        """Filter the whole record (and the end fix); return every step's weighted cloud."""
+        """Filter the whole record (and the end fix); keep every step's weighted cloud."""
+        steps = list(self.steps(record, rng))
+        return FilterRun(record.float_id, steps, self.n_resamples, list(self.warnings))
+
+    def steps(self, record: ArrivalRecord, rng: np.random.Generator) -> Iterator[Step]:
+        """Filter the record step by step, yielding each weighted cloud as it is made, so a
+        caller that needs no history (no smoothing) holds one step at a time.
+        `self.n_resamples` and `self.warnings` are complete once the iteration ends."""
         cfg = self.config
         n = cfg.filter.particles
         lat, lon = scatter(
@@ -205,8 +213,8 @@ class ParticleFilter:
         )
         log_w = np.zeros(n)
         t_prev = self.info.launch_time
-        steps: list[Step] = []
-        n_resamples = 0
+        self.n_resamples = 0
+        self.warnings = []
         fix_time = self._end_fix_time()
         events: list[Window | None] = list(record.windows)
         if fix_time is not None:  # the fix goes after every window at or before its time
@@ -227,21 +235,18 @@ class ParticleFilter:
             log_w = log_w + loglik
             weights, log_post = normalise_log_weights(log_w)
             eff = ess(weights)
-            steps.append(
-                Step(
-                    cloud=Cloud(time, lat, lon, weights),
-                    loglik=np.nan if skipped else log_post - log_prior,
-                    ess=eff,
-                    window=window,
-                    beacon_index=index,
-                    label_probs=np.einsum("p,psk->sk", weights, p_match) if self.label_probs else None,
-                )
+            yield Step(
+                cloud=Cloud(time, lat, lon, weights),
+                loglik=np.nan if skipped else log_post - log_prior,
+                ess=eff,
+                window=window,
+                beacon_index=index,
+                label_probs=np.einsum("p,psk->sk", weights, p_match) if self.label_probs else None,
             )
             if eff < cfg.filter.resample_ess_fraction * n:
                 idx = systematic(weights, rng)
                 lat, lon, log_w = lat[idx], lon[idx], np.zeros(n)
-                n_resamples += 1
-        return FilterRun(record.float_id, steps, n_resamples, list(self.warnings))
+                self.n_resamples += 1
 
     def _finite_loglik(self, loglik: NDArray, time: np.datetime64) -> tuple[NDArray, bool]:
         """Guard against a non-finite likelihood (a bug or an extreme setting, not data: the

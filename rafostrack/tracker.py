@@ -37,20 +37,25 @@ class TrackOutput:
 def track_record(
     beacons: BeaconTable, info: FloatInfo, config: Config, record: ArrivalRecord, *, also_filtered: bool = False
 ) -> TrackOutput:
-    """Filter the record with the float's own generator, then smooth if configured."""
-    want_filtered = not config.smoother.enabled or also_filtered
-    pf = ParticleFilter(beacons, info, config, label_probs=want_filtered)
+    """Filter the record with the float's own generator, then smooth if configured.
+
+    Without smoothing, each step is summarised as the filter makes it and then dropped, so
+    memory does not grow with the record; smoothing needs every step's cloud (about
+    24 bytes per particle per window)."""
+    rng = float_rng(config.filter.seed, info.float_id)
     started = time.perf_counter()
-    run = pf.run(record, float_rng(config.filter.seed, info.float_id))
+    if not config.smoother.enabled:  # no history needed: summarise each step as it is made
+        pf = ParticleFilter(beacons, info, config)
+        filtered = build_estimate(info.float_id, pf.steps(record, rng), pf, beacons, config.ambiguity)
+        filter_s = time.perf_counter() - started
+        return TrackOutput(filtered, filtered, pf.n_resamples, list(pf.warnings), filter_s, 0.0)
+
+    pf = ParticleFilter(beacons, info, config, label_probs=also_filtered)
+    run = pf.run(record, rng)
     filter_s = time.perf_counter() - started
-    filtered = None
-    if want_filtered:
-        filtered = build_estimate(run, pf, beacons, config.ambiguity)
-    smoother_s = 0.0
-    estimate = filtered
-    if config.smoother.enabled:
-        started = time.perf_counter()
-        weights = smooth([s.cloud for s in run.steps], config.motion.diffusion_km_per_day)
-        estimate = build_estimate(run, pf, beacons, config.ambiguity, weights)
-        smoother_s = time.perf_counter() - started
+    filtered = build_estimate(info.float_id, run.steps, pf, beacons, config.ambiguity) if also_filtered else None
+    started = time.perf_counter()
+    weights = smooth([s.cloud for s in run.steps], config.motion.diffusion_km_per_day)
+    estimate = build_estimate(info.float_id, run.steps, pf, beacons, config.ambiguity, weights)
+    smoother_s = time.perf_counter() - started
     return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s)
