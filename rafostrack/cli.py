@@ -1,4 +1,4 @@
-"""Command-line interface: `rafostrack track` and `rafostrack simulate`.
+"""Command-line interface: `rafostrack track`, `rafostrack batch` and `rafostrack simulate`.
 
 Thin: parse options, call the pipeline, report. A user mistake (`InputError`) prints one
 line `rafostrack: error: ...` and exits with code 2; `--debug` shows the traceback.

@@ -12,7 +12,7 @@ import copy
 import math
 import re
 import tomllib
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -240,7 +240,3 @@ def with_overrides(config: Config, **sections: dict[str, Any]) -> Config:
     """A copy of `config` with some keys replaced, validated like any other layer."""
     merged = merge_layer(config.to_dict(), sections, "override")
     return Config(**{name: cls(**merged[name]) for name, cls in _SECTIONS.items()})
-
-
-def section_fields(section: str) -> list[str]:
-    return [f.name for f in fields(_SECTIONS[section])]

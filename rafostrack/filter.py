@@ -33,7 +33,7 @@ from .motion import propagate, scatter
 from .resampling import ess, normalise_log_weights, systematic
 from .smoother import Cloud
 
-Engine = Callable[[NDArray, NDArray], Association]
+Engine = Callable[..., Association]  # (log_match, log_unheard, *, marginals=True) -> Association
 # Particles carrying less than this fraction of the mass are left out when association
 # marginals are recomputed for a reweighted (smoothed) cloud.
 _NEGLIGIBLE_MASS = 1e-6
@@ -128,7 +128,7 @@ class ParticleFilter:
         self, lat: NDArray, lon: NDArray, window: Window, *, marginals: bool = True
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], m.WindowBeacons]:
         """Per-particle log p(T | X) and association marginals (P, s, K) for one window
-        (NaN marginals from the exact engine when `marginals` is False)."""
+        (marginals may be NaN when `marginals` is False: see `rafostrack.engines`)."""
         if self.method == "labeled":
             return self._labeled_loglik(lat, lon, window)
         model = self.config.model
@@ -143,10 +143,7 @@ class ParticleFilter:
             model=model,
             ranked=self.method != "unranked",
         )
-        if self.engine is exact_engine.associate:
-            assoc = exact_engine.associate(factors.log_match, factors.log_unheard, marginals=marginals)
-        else:
-            assoc = self.engine(factors.log_match, factors.log_unheard)
+        assoc = self.engine(factors.log_match, factors.log_unheard, marginals=marginals)
         return factors.log_base + assoc.log_z, assoc.p_match, wb
 
     def _labeled_loglik(

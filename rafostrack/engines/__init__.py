@@ -4,7 +4,9 @@ Each engine takes the factors of `rafostrack.model` (log w of shape (P, s, K), l
 shape (P, s)) and returns an `Association`: the log of
     Z = sum over partial matchings M of prod_{(i,j) in M} w_ij prod_{i unmatched} u_i
 (the window's log-likelihood less the shared clutter term) and the marginal probability
-that signal j came from beacon i, per particle.
+that signal j came from beacon i, per particle. Every engine accepts `marginals=False`,
+a hint that only log Z is wanted (the exact engine then skips its backward pass and
+returns NaN marginals).
 """
 
 from __future__ import annotations

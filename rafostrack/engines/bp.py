@@ -36,8 +36,12 @@ def associate(
     *,
     tolerance: float = 1e-9,
     max_iterations: int = 500,
+    marginals: bool = True,
 ) -> Association:
     """Bethe estimate of log Z and BP pair marginals (see module docstring).
+
+    `marginals` is accepted for the common engine interface; BP's marginals are its
+    beliefs, which the Bethe estimate needs anyway, so they are always returned.
 
     Particles whose messages have not converged after `max_iterations` get the beliefs of
     the last iteration.
