@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from rafostrack.config import METHODS, load_config, with_overrides
+from rafostrack.config import METHODS, load_config, method_overrides, with_overrides
 from rafostrack.evaluate import association_accuracy, inside_ellipse, position_errors_km
 from rafostrack.posterior import ELLIPSE_95_SCALE
 from rafostrack.simulate import simulate_mission, synthetic_scenario
@@ -31,7 +31,7 @@ def evaluate(clutter_rate: float, method: str, args: argparse.Namespace) -> dict
     config = with_overrides(
         load_config(),
         model={"clutter_rate": clutter_rate},
-        filter={"method": method, "particles": args.particles, "seed": args.seed},
+        filter={**method_overrides(method), "particles": args.particles, "seed": args.seed},
     )
     beacons, floats = synthetic_scenario(days=args.days, n_floats=args.floats, rng=args.seed)
     rng = np.random.default_rng([args.seed, int(clutter_rate * 100)])

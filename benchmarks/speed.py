@@ -15,7 +15,7 @@ import pstats
 import time
 from pathlib import Path
 
-from rafostrack.config import with_overrides
+from rafostrack.config import method_overrides, with_overrides
 from rafostrack.pipeline import TrackInputs, load_float
 from rafostrack.tracker import track_record
 
@@ -35,7 +35,7 @@ def main() -> None:
     print(f"{args.float_file.name}: {n_windows} windows, {n_toas} TOAs, {len(loaded.beacons)} beacons")
     print(f"{'method':>9} {'particles':>9} {'filter_s':>9} {'ms/window':>10} {'smoother_s':>10} {'ratio':>6}")
     for method in args.methods:
-        config = with_overrides(loaded.config, filter={"method": method})
+        config = with_overrides(loaded.config, filter=method_overrides(method))
         profiler = cProfile.Profile() if args.profile else None
         started = time.perf_counter()
         if profiler:

@@ -52,7 +52,7 @@ from typing import Any, TextIO
 from . import __version__
 from .config import load_config
 from .errors import InputError
-from .outputs import file_digest, write_json
+from .io.writers import file_digest, write_json
 from .workers import single_threaded_math
 
 MANIFEST = "batch-manifest.json"
@@ -86,7 +86,8 @@ class Mission:
 def discover(roots: Sequence[Path], exclude: Path | None = None) -> list[Mission]:
     """Every mission directory under `roots`, sorted by output name; `InputError` on a bad root
     or when two missions would write the same output directory."""
-    from .inputs import FLOAT_OPTIONAL, FLOAT_REQUIRED, read_csv_table
+    from .io.csv_mission import FLOAT_OPTIONAL, FLOAT_REQUIRED
+    from .io.csv_table import read_csv_table
 
     exclude = exclude.resolve() if exclude is not None else None
     found: dict[Path, str] = {}
@@ -860,7 +861,7 @@ def _run_locked(
     options: BatchOptions, missions: list[Mission], lock: BatchLock, reporter: Reporter, client: Any
 ) -> tuple[list[FloatOutcome], str]:
     """Everything done while holding OUT's lock: clean, plan, run, write the reports."""
-    from .atomic import write_text_atomic
+    from .io.atomic import write_text_atomic
 
     started = time.monotonic()
     out = options.out

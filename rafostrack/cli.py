@@ -14,7 +14,6 @@ from typing import Any
 import click
 
 from . import __version__
-from .config import METHODS
 from .errors import InputError
 
 
@@ -25,7 +24,7 @@ def _report_errors(func):
 
     @wraps(func)
     def wrapper(*args, **kwargs):
-        from .inputs import check_output_dir
+        from .io.outdir import check_output_dir
 
         debug = click.get_current_context().find_root().params.get("debug", False)
         out_dir = kwargs.get("out_dir")
@@ -76,23 +75,54 @@ def _parse_launch(_ctx, _param, value: str | None) -> tuple[float, float] | None
     return lat, lon
 
 
+# Command-line flags that set a config key: flag -> (section, key). The flag's type is the
+# config field's; its value is checked like any other config layer (`rafostrack.config`).
+CONFIG_FLAGS: dict[str, tuple[str, str]] = {
+    "likelihood": ("filter", "likelihood"),
+    "engine": ("filter", "engine"),
+    "motion": ("motion", "model"),
+    "particles": ("filter", "particles"),
+    "seed": ("filter", "seed"),
+    "clutter_rate": ("model", "clutter_rate"),
+    "p_detect": ("model", "p_detect"),
+    "toa_sigma_s": ("model", "toa_sigma_s"),
+}
+
+
+def config_options(*flags: str):
+    """Decorator adding `--<flag>` options for config keys, typed and described from the
+    config field and its comment in default.toml."""
+    from .config import field_type, key_comment
+
+    def decorate(func):
+        for flag in reversed(flags):
+            section, key = CONFIG_FLAGS[flag]
+            kind = field_type(section, key)
+            help_text = f"[{section}] {key}: {key_comment(section, key)}"
+            func = click.option(f"--{flag.replace('_', '-')}", flag, type=kind, help=help_text)(func)
+        return func
+
+    return decorate
+
+
 def _overrides(**flags: Any) -> dict[str, dict[str, Any]]:
     """Config overrides from command-line flags that were given (section, key)."""
-    where = {
-        "method": "filter",
-        "particles": "filter",
-        "seed": "filter",
-        "clutter_rate": "model",
-        "p_detect": "model",
-        "toa_sigma_s": "model",
-        "smooth": "smoother",
-    }
+    where = {**CONFIG_FLAGS, "smooth": ("smoother", "enabled")}
     out: dict[str, dict[str, Any]] = {}
-    keys = {"smooth": "enabled"}  # flag name -> config key where they differ
     for flag, value in flags.items():
         if value is not None:
-            out.setdefault(where[flag], {})[keys.get(flag, flag)] = value
+            section, key = where[flag]
+            out.setdefault(section, {})[key] = value
     return out
+
+
+def _refuse_method(method: str | None) -> None:
+    """`--method` was split into `--likelihood` and `--engine`: say what to write instead."""
+    if method is not None:
+        from .config import METHODS
+
+        likelihood, engine = METHODS.get(method, METHODS["exact"])
+        raise InputError(f"--method was split into two options: use --likelihood {likelihood} --engine {engine}")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -112,21 +142,20 @@ def main(debug: bool) -> None:
 @click.option("--floats", type=click.Path(path_type=Path), help="Float table (default: floats.csv beside FLOAT_FILE).")
 @click.option("--launch", callback=_parse_launch, metavar="LAT,LON", help="Override the launch position.")
 @click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
-@click.option("--method", type=click.Choice(METHODS), help="Association method (default from config: exact).")
-@click.option("--particles", type=int, help="Number of particles.")
-@click.option("--seed", type=int, help="Random seed.")
-@click.option("--clutter-rate", type=float, help="Expected clutter signals per window.")
-@click.option("--p-detect", type=float, help="Detection probability of a source's signal.")
-@click.option("--toa-sigma-s", type=float, help="Arrival-time noise sd (s).")
+@config_options("likelihood", "engine", "motion", "particles", "seed", "clutter_rate", "p_detect", "toa_sigma_s")
+@click.option("--method", hidden=True, help="Removed: see --likelihood and --engine.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"), show_default=True)
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @click.option("--no-smooth", is_flag=True, help="Filter only: no backward smoothing over the mission.")
 @click.option("--also-filtered", is_flag=True, help="Also write the filtered estimate (*_filtered.parquet).")
 @_report_errors
-def track(float_file, beacons, floats, launch, config_file, out_dir, no_plots, no_smooth, also_filtered, **flags):
+def track(
+    float_file, beacons, floats, launch, config_file, out_dir, no_plots, no_smooth, also_filtered, method, **flags
+):
     """Label every TOA of FLOAT_FILE and estimate the float's track."""
     from .pipeline import TrackInputs, track_float
 
+    _refuse_method(method)
     inputs = TrackInputs(
         float_path=float_file,
         beacons_path=beacons,
@@ -157,9 +186,7 @@ def track(float_file, beacons, floats, launch, config_file, out_dir, no_plots, n
 @click.option(
     "--n-floats", type=click.IntRange(min=1), default=1, show_default=True, help="Floats (synthetic scenario)."
 )
-@click.option("--clutter-rate", type=float, help="Expected clutter signals per window.")
-@click.option("--p-detect", type=float, help="Detection probability.")
-@click.option("--toa-sigma-s", type=float, help="Arrival-time noise sd (s).")
+@config_options("clutter_rate", "p_detect", "toa_sigma_s")
 @click.option("--config", "config_file", type=click.Path(path_type=Path), help="TOML with a [model] table.")
 @_report_errors
 def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> None:
@@ -187,10 +214,11 @@ def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> N
 @click.option("--force", is_flag=True, help="Reprocess every float, even unchanged ones.")
 @click.option("--scheduler", metavar="ADDRESS", help="Run on this Dask scheduler (tcp://host:8786) instead.")
 @click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
-@click.option("--method", type=click.Choice(METHODS), help="Association method (default from config: exact).")
+@config_options("likelihood", "engine", "motion")
+@click.option("--method", hidden=True, help="Removed: see --likelihood and --engine.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @_report_errors
-def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots) -> None:
+def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots, **flags) -> None:
     """Track every float of the mission directories under ROOTs, skipping unchanged ones.
 
     Exit code 0 when every float succeeded, 1 when some failed, 2 on a usage error
@@ -198,6 +226,7 @@ def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots)
     """
     from .batch import run_batch
 
+    _refuse_method(method)
     result = run_batch(
         roots,
         out_dir,
@@ -205,7 +234,7 @@ def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots)
         force=force,
         scheduler=scheduler,
         config_file=config_file,
-        overrides=_overrides(method=method),
+        overrides=_overrides(**flags),
         plots=not no_plots,
     )
     click.echo(result.summary)

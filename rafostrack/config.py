@@ -1,89 +1,137 @@
-"""Run configuration: defaults, layered TOML overrides and validation.
+"""Run configuration: one typed field per key, its constraint declared beside it.
 
-Layers, later wins: the package's `default.toml` (also at `configs/default.toml`), a
-`rafostrack.toml` in the mission directory, `--config FILE`, command-line flags. Every
-layer is checked against the defaults: an unknown section or key, a wrong type or a value
-out of range is an `InputError` naming the file and key.
+Values come only from the package's `default.toml` (every key, with a comment), then the
+layers that override it, later wins: a `rafostrack.toml` in the mission directory,
+`--config FILE`, command-line flags. Every layer is checked field by field: an unknown
+section or key (with the nearest valid name suggested), a wrong type, or a value outside
+the field's declared range is an `InputError` naming the file and key. A key that was
+renamed gets a one-line error saying what to write instead.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import re
 import tomllib
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, get_type_hints
 
 from .errors import InputError, nearest
 
-METHODS = ("exact", "bp", "unranked", "labeled")
+
+def setting(
+    expect: str | None = None,
+    check: Callable[[Any], bool] | None = None,
+    *,
+    choices: Callable[[], Iterable[str]] | None = None,
+) -> Any:
+    """A config field whose value must satisfy `check` (described by `expect`, e.g. "> 0"),
+    or be one of `choices()` (a callable, so that a registry is consulted when a value is
+    checked, not when this module is imported). Defaults live in default.toml only."""
+    return field(metadata={"expect": expect, "check": check, "choices": choices})
+
+
+def _positive(v: float) -> bool:
+    return v > 0
+
+
+def _non_negative(v: float) -> bool:
+    return v >= 0
+
+
+def _probability_open(v: float) -> bool:
+    return 0 < v < 1
+
+
+def _fraction(v: float) -> bool:
+    return 0 <= v <= 1
+
+
+def _registry(module: str, name: str) -> Callable[[], Iterable[str]]:
+    """Choices read from a registry `module.name` (a mapping or list of names) when checked."""
+
+    def names() -> Iterable[str]:
+        import importlib
+
+        return list(getattr(importlib.import_module(module), name))
+
+    return names
 
 
 @dataclass(frozen=True)
 class ModelConfig:
     """Measurement model (paper section 2): arrival times, detection, clutter."""
 
-    sound_speed_m_s: float
-    toa_sigma_s: float
-    p_detect: float
-    clutter_rate: float
-    multipath_fraction: float
-    multipath_delay_s: float
-    detection_range_km: float
-    detection_falloff_km: float
-    window_s: float
-    max_signals: int
+    sound_speed_m_s: float = setting("> 0", _positive)
+    toa_sigma_s: float = setting("> 0", _positive)
+    p_detect: float = setting("strictly between 0 and 1", _probability_open)
+    clutter_rate: float = setting("> 0 (use a small value for clean data)", _positive)
+    multipath_fraction: float = setting("in [0, 1)", lambda v: 0 <= v < 1)
+    multipath_delay_s: float = setting("> 0", _positive)
+    detection_range_km: float = setting(">= 0 (0 = no range limit)", _non_negative)
+    detection_falloff_km: float = setting("> 0", _positive)
+    window_s: float = setting("> 0", _positive)
+    max_signals: int = setting(">= 1", lambda v: v >= 1)
 
 
 @dataclass(frozen=True)
 class MotionConfig:
-    """Random-walk drift model (paper eq. 1)."""
+    """How the float drifts between windows (`rafostrack.motion`)."""
 
-    diffusion_km_per_day: float
+    model: str = setting(choices=_registry("rafostrack.motion", "MOTION_MODELS"))
+    diffusion_km_per_day: float = setting("> 0", _positive)
+    velocity_sd_km_per_day: float = setting("> 0", _positive)
+    decorrelation_days: float = setting("> 0", _positive)
+    mean_current_east_km_per_day: float = setting()
+    mean_current_north_km_per_day: float = setting()
 
 
 @dataclass(frozen=True)
 class FixesConfig:
     """Launch and end position fixes as observations."""
 
-    launch_sd_km: float
-    end_sd_km: float
-    use_end_fix: bool
+    launch_sd_km: float = setting("> 0", _positive)
+    end_sd_km: float = setting("> 0", _positive)
+    use_end_fix: bool = setting()
 
 
 @dataclass(frozen=True)
 class SmootherConfig:
-    enabled: bool
+    enabled: bool = setting()
 
 
 @dataclass(frozen=True)
 class AmbiguityConfig:
     """When a posterior counts as two separate modes (see posterior.two_modes)."""
 
-    min_mode_weight: float
-    min_separation_km: float
-    separation_factor: float
+    min_mode_weight: float = setting("in (0, 0.5]", lambda v: 0 < v <= 0.5)
+    min_separation_km: float = setting(">= 0", _non_negative)
+    separation_factor: float = setting("> 0", _positive)
 
 
 @dataclass(frozen=True)
 class FilterConfig:
-    """Particle filter: size, seed, association method, resampling threshold."""
+    """Particle filter: size, seed, the evidence model and its engine, resampling."""
 
-    particles: int
-    seed: int
-    method: str
-    resample_ess_fraction: float
+    particles: int = setting("between 2 and 10000000", lambda v: 2 <= v <= 10_000_000)
+    seed: int = setting(">= 0", _non_negative)
+    likelihood: str = setting(choices=_registry("rafostrack.likelihoods", "ARRIVAL_LIKELIHOODS"))
+    engine: str = setting(choices=_registry("rafostrack.engines", "ENGINES"))
+    resampling: str = setting(choices=_registry("rafostrack.resampling", "RESAMPLERS"))
+    resample_ess_fraction: float = setting("in [0, 1]", _fraction)
 
 
 @dataclass(frozen=True)
 class BPConfig:
     """Loopy belief propagation stopping rule."""
 
-    tolerance: float
-    max_iterations: int
+    tolerance: float = setting("> 0", _positive)
+    max_iterations: int = setting(">= 1", lambda v: v >= 1)
 
 
 @dataclass(frozen=True)
@@ -100,42 +148,34 @@ class Config:
         return asdict(self)
 
 
-_SECTIONS = {
-    "model": ModelConfig,
-    "motion": MotionConfig,
-    "fixes": FixesConfig,
-    "filter": FilterConfig,
-    "smoother": SmootherConfig,
-    "ambiguity": AmbiguityConfig,
-    "bp": BPConfig,
+SECTIONS: dict[str, type] = {f.name: get_type_hints(Config)[f.name] for f in dataclasses.fields(Config)}
+
+# The paper's methods, each a (likelihood, engine) pair; they were the values of the
+# removed `[filter] method` key and name the compared methods in experiments and benchmarks.
+METHODS: dict[str, tuple[str, str]] = {
+    "exact": ("ranked", "exact"),
+    "bp": ("ranked", "bp"),
+    "unranked": ("unranked", "exact"),
+    "labeled": ("labeled", "exact"),
 }
 
-# (predicate, what is expected) per key; keys not listed only need the right type.
-_RANGES: dict[tuple[str, str], tuple[Any, str]] = {
-    ("model", "sound_speed_m_s"): (lambda v: v > 0, "> 0"),
-    ("model", "toa_sigma_s"): (lambda v: v > 0, "> 0"),
-    ("model", "p_detect"): (lambda v: 0 < v < 1, "strictly between 0 and 1"),
-    ("model", "clutter_rate"): (lambda v: v > 0, "> 0 (use a small value for clean data)"),
-    ("model", "multipath_fraction"): (lambda v: 0 <= v < 1, "in [0, 1)"),
-    ("model", "multipath_delay_s"): (lambda v: v > 0, "> 0"),
-    ("model", "detection_range_km"): (lambda v: v >= 0, ">= 0 (0 = no range limit)"),
-    ("model", "detection_falloff_km"): (lambda v: v > 0, "> 0"),
-    ("model", "window_s"): (lambda v: v > 0, "> 0"),
-    ("model", "max_signals"): (lambda v: v >= 1, ">= 1"),
-    ("motion", "diffusion_km_per_day"): (lambda v: v > 0, "> 0"),
-    ("fixes", "launch_sd_km"): (lambda v: v > 0, "> 0"),
-    ("fixes", "end_sd_km"): (lambda v: v > 0, "> 0"),
-    ("ambiguity", "min_mode_weight"): (lambda v: 0 < v <= 0.5, "in (0, 0.5]"),
-    ("ambiguity", "min_separation_km"): (lambda v: v >= 0, ">= 0"),
-    ("ambiguity", "separation_factor"): (lambda v: v > 0, "> 0"),
-    ("filter", "particles"): (lambda v: 2 <= v <= 10_000_000, "between 2 and 10000000"),
-    ("filter", "seed"): (lambda v: v >= 0, ">= 0"),
-    ("filter", "method"): (lambda v: v in METHODS, f"one of {', '.join(METHODS)}"),
-    ("filter", "resample_ess_fraction"): (lambda v: 0 <= v <= 1, "in [0, 1]"),
-    ("bp", "tolerance"): (lambda v: v > 0, "> 0"),
-    ("bp", "max_iterations"): (lambda v: v >= 1, ">= 1"),
-}
 
+def method_overrides(method: str) -> dict[str, str]:
+    """The `[filter]` keys of one of the paper's methods (`METHODS`)."""
+    likelihood, engine = METHODS[method]
+    return {"likelihood": likelihood, "engine": engine}
+
+
+def _method_hint(value: Any) -> str:
+    likelihood, engine = METHODS.get(str(value), METHODS["exact"])
+    return (
+        f"was split into two keys: write likelihood = {likelihood!r} and engine = {engine!r} "
+        "(likelihood: ranked, unranked or labeled; engine: how the association sum is computed)"
+    )
+
+
+# Keys that no longer exist: (section, key) -> what to write instead, given the old value.
+RENAMED: dict[tuple[str, str], Callable[[Any], str]] = {("filter", "method"): _method_hint}
 
 _MAX_CONFIG_BYTES = 1 << 20  # a config file is a few KB; refuse absurd ones before parsing
 _DEEP_KEY = re.compile(r"(?:[^.\n=\[\]]{0,64}\.){64}")  # a key dotted 64 levels deep
@@ -171,34 +211,73 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise InputError(f"{path}: not valid TOML: values nested too deeply") from None
 
 
-def _default_layer() -> dict[str, dict[str, Any]]:
+def default_layer() -> dict[str, dict[str, Any]]:
+    """The packaged default.toml, as nested dicts."""
     text = resources.files("rafostrack").joinpath("default.toml").read_text(encoding="utf-8")
     return tomllib.loads(text)
 
 
-def _check_value(section: str, key: str, value: Any, expected: Any, source: str) -> Any:
+def _field(section: str, key: str) -> tuple[dataclasses.Field, type]:
+    cls = SECTIONS[section]
+    return {f.name: f for f in dataclasses.fields(cls)}[key], get_type_hints(cls)[key]
+
+
+def field_type(section: str, key: str) -> type:
+    """The Python type of [section] key (float, int, bool or str)."""
+    return _field(section, key)[1]
+
+
+def key_comment(section: str, key: str) -> str:
+    """The comment above [section] key in default.toml, as one line (for help texts); keys
+    on consecutive lines share the comment above the first of them."""
+    text = resources.files("rafostrack").joinpath("default.toml").read_text(encoding="utf-8")
+    current, comment, after_key = None, [], False
+    for line in text.splitlines():
+        stripped = line.strip()
+        if stripped.startswith("[") and stripped.endswith("]"):
+            current, comment, after_key = stripped[1:-1], [], False
+        elif stripped.startswith("#"):
+            comment = [*([] if after_key else comment), stripped.lstrip("# ")]
+            after_key = False
+        elif "=" in stripped:
+            if current == section and stripped.split("=")[0].strip() == key:
+                return " ".join(comment)
+            after_key = True
+        elif not stripped:
+            comment, after_key = [], False
+    return ""
+
+
+def check_value(section: str, key: str, value: Any, source: str) -> Any:
+    """`value` for [section] key, converted to the field's type and checked against its
+    declared constraint; an `InputError` naming `source` and the key otherwise."""
     where = f"{source}: [{section}] {key}"
-    if isinstance(expected, bool) or isinstance(value, bool):
-        if not (isinstance(expected, bool) and isinstance(value, bool)):
-            kind = "true or false" if isinstance(expected, bool) else f"a {type(expected).__name__}"
-            raise InputError(f"{where}: expected {kind}, got {_short(value)}")
+    spec, kind = _field(section, key)
+    if kind is bool or isinstance(value, bool):
+        if not (kind is bool and isinstance(value, bool)):
+            expected = "true or false" if kind is bool else f"a {kind.__name__}"
+            raise InputError(f"{where}: expected {expected}, got {_short(value)}")
         return value
-    if isinstance(expected, float):
+    if kind is float:
         if not isinstance(value, int | float):
             raise InputError(f"{where}: expected a number, got {_short(value)}")
         value = float(value)
         if not math.isfinite(value):
             raise InputError(f"{where}: expected a finite number, got {_short(value)}")
-    elif isinstance(expected, int):
+    elif kind is int:
         if isinstance(value, float) and value.is_integer():
             value = int(value)
         if not isinstance(value, int):
             raise InputError(f"{where}: expected a whole number, got {_short(value)}")
-    elif isinstance(expected, str) and not isinstance(value, str):
+    elif kind is str and not isinstance(value, str):
         raise InputError(f"{where}: expected a string, got {_short(value)}")
-    check = _RANGES.get((section, key))
-    if check is not None and not check[0](value):
-        raise InputError(f"{where}: must be {check[1]}, got {_short(value)}")
+    meta = spec.metadata
+    if meta.get("choices") is not None:
+        names = list(meta["choices"]())
+        if value not in names:
+            raise InputError(f"{where}: must be one of {', '.join(names)}, got {_short(value)}{nearest(value, names)}")
+    if meta.get("check") is not None and not meta["check"](value):
+        raise InputError(f"{where}: must be {meta['expect']}, got {_short(value)}")
     return value
 
 
@@ -206,21 +285,28 @@ def merge_layer(base: dict[str, dict[str, Any]], layer: dict[str, Any], source: 
     """Return `base` updated by `layer`, rejecting unknown sections/keys and bad values."""
     merged = copy.deepcopy(base)
     for section, values in layer.items():
-        if section not in base and not isinstance(values, dict):
-            owners = [s for s in base if section in base[s]]
+        if section not in SECTIONS and not isinstance(values, dict):
+            owners = [s for s in SECTIONS if section in base.get(s, {})]
             hint = f"; expected it under [{owners[0]}]" if owners else "; expected [section] then key = value"
             raise InputError(f"{source}: key {section!r} is outside any [section]{hint}")
-        if section not in base:
-            hint = nearest(section, base) or f" (expected one of {', '.join(f'[{s}]' for s in base)})"
+        if section not in SECTIONS:
+            hint = nearest(section, SECTIONS) or f" (expected one of {', '.join(f'[{s}]' for s in SECTIONS)})"
             raise InputError(f"{source}: unknown section [{section}]{hint}")
         if not isinstance(values, dict):
             raise InputError(f"{source}: [{section}]: expected a table of keys, got {_short(values)}")
+        known = [f.name for f in dataclasses.fields(SECTIONS[section])]
         for key, value in values.items():
-            if key not in base[section]:
-                hint = nearest(key, base[section]) or f" (expected one of {', '.join(base[section])})"
+            if (section, key) in RENAMED:
+                raise InputError(f"{source}: [{section}] {key} {RENAMED[section, key](value)}")
+            if key not in known:
+                hint = nearest(key, known) or f" (expected one of {', '.join(known)})"
                 raise InputError(f"{source}: unknown key [{section}] {key}{hint}")
-            merged[section][key] = _check_value(section, key, value, base[section][key], source)
+            merged.setdefault(section, {})[key] = check_value(section, key, value, source)
     return merged
+
+
+def _build(layers: dict[str, dict[str, Any]]) -> Config:
+    return Config(**{name: cls(**layers[name]) for name, cls in SECTIONS.items()})
 
 
 def load_config(
@@ -228,15 +314,14 @@ def load_config(
     overrides: dict[str, dict[str, Any]] | None = None,
 ) -> Config:
     """Build the effective configuration: defaults, then each file, then `overrides`."""
-    layers = _default_layer()
+    layers = merge_layer({}, default_layer(), "default.toml")
     for path in files:
         layers = merge_layer(layers, _read_toml(Path(path)), str(path))
     if overrides:
         layers = merge_layer(layers, overrides, "command line")
-    return Config(**{name: cls(**layers[name]) for name, cls in _SECTIONS.items()})
+    return _build(layers)
 
 
 def with_overrides(config: Config, **sections: dict[str, Any]) -> Config:
     """A copy of `config` with some keys replaced, validated like any other layer."""
-    merged = merge_layer(config.to_dict(), sections, "override")
-    return Config(**{name: cls(**merged[name]) for name, cls in _SECTIONS.items()})
+    return _build(merge_layer(config.to_dict(), sections, "override"))

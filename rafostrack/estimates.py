@@ -1,4 +1,4 @@
-"""Per-window estimates from a filter run under a set of weights (filtered or smoothed).
+"""Per-window estimates from filter steps under a set of weights (filtered or smoothed).
 
 For each window: the position and its covariance ellipse, the spread, the ESS, whether
 the posterior has two separate modes, and each TOA's most probable label. Where the
@@ -9,7 +9,7 @@ the whole posterior, and both modes go to the modes table.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,8 +17,8 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from .config import AmbiguityConfig
-from .filter import ParticleFilter, Step
-from .inputs import BeaconTable, Window
+from .domain import Particles, Window
+from .filter import Step
 from .posterior import two_modes
 from .resampling import ess
 
@@ -67,38 +67,46 @@ def label_rows(
     return rows
 
 
-def build_estimate(
-    float_id: str,
-    steps: Iterable[Step],
-    pf: ParticleFilter,
-    beacons: BeaconTable,
-    ambiguity: AmbiguityConfig,
-    smoothed_weights: Sequence[NDArray] | None = None,
-) -> Estimate:
-    """Tables for every window among `steps`: filtered (each step's own weights; `steps` may
-    be a stream), or under `smoothed_weights` (one array per step)."""
-    track_rows, labels, modes_rows = [], [], []
-    pairs = (
-        ((s, s.cloud.weights) for s in steps) if smoothed_weights is None else zip(steps, smoothed_weights, strict=True)
-    )
-    for step, weights in pairs:
+# Association marginals (s, K) of a window under some weights, and their beacon-table rows.
+LabelProbs = Callable[[Particles, NDArray, Window], tuple[NDArray, NDArray]]
+
+
+class EstimateBuilder:
+    """Accumulates one output row per window (and its labels, and its modes if ambiguous),
+    from steps given one at a time, so a filter-only run can summarise its steps as they
+    are made and keep none of them."""
+
+    def __init__(self, float_id: str, beacon_ids: NDArray, ambiguity: AmbiguityConfig, kind: str):
+        self.float_id = float_id
+        self.beacon_ids = beacon_ids
+        self.ambiguity = ambiguity
+        self.kind = kind
+        self._track: list[tuple] = []
+        self._labels: list[tuple] = []
+        self._modes: list[tuple] = []
+
+    def add(self, step: Step, weights: NDArray | None = None, label_probs: LabelProbs | None = None) -> None:
+        """Summarise `step` under `weights` (default: its filter weights). Labels come from
+        the step's filtered marginals, or from `label_probs` under the given weights."""
         window = step.window
-        if window is None:  # the end fix: an observation, not an output row
-            continue
+        if window is None:  # a position fix: an observation, not an output row
+            return
         cloud = step.cloud
+        w = cloud.weights if weights is None else weights
+        amb = self.ambiguity
         modes = two_modes(
             cloud.lat,
             cloud.lon,
-            weights,
-            min_weight=ambiguity.min_mode_weight,
-            min_separation_km=ambiguity.min_separation_km,
-            separation_factor=ambiguity.separation_factor,
+            w,
+            min_weight=amb.min_mode_weight,
+            min_separation_km=amb.min_separation_km,
+            separation_factor=amb.separation_factor,
         )
         position = modes.first if modes.ambiguous else modes.whole
         smaj, smin, angle = position.ellipse()
-        track_rows.append(
+        self._track.append(
             (
-                float_id,
+                self.float_id,
                 window.time,
                 position.lat,
                 position.lon,
@@ -106,7 +114,7 @@ def build_estimate(
                 smaj,
                 smin,
                 angle,
-                step.ess if smoothed_weights is None else ess(weights),
+                step.ess if weights is None else ess(w),
                 window.n_signals,
                 step.loglik,
                 modes.ambiguous,
@@ -114,21 +122,43 @@ def build_estimate(
             )
         )
         if modes.ambiguous:
-            for k, (g, w) in enumerate(((modes.first, modes.first_weight), (modes.second, modes.second_weight)), 1):
-                modes_rows.append((float_id, window.time, k, g.lat, g.lon, w, g.sd_km))
-        if smoothed_weights is None:
+            for k, (g, mw) in enumerate(((modes.first, modes.first_weight), (modes.second, modes.second_weight)), 1):
+                self._modes.append((self.float_id, window.time, k, g.lat, g.lon, mw, g.sd_km))
+        if label_probs is None:
             probs, index = step.label_probs, step.beacon_index
         elif window.n_signals:
-            probs, index = pf.association_probs(cloud, weights, window)
+            probs, index = label_probs(cloud.particles, w, window)
         else:
             probs, index = np.zeros((0, 0)), np.zeros(0, dtype=np.intp)
-        labels.extend(label_rows(float_id, window, beacons.beacon_id, index, probs))
-    return Estimate(
-        kind="filtered" if smoothed_weights is None else "smoothed",
-        track=_frame(track_rows, TRACK_COLUMNS, {"n_signals": "int64", "ambiguous": "bool"}),
-        labels=_frame(labels, LABEL_COLUMNS, {"rank": "int64"}),
-        modes=_frame(modes_rows, MODE_COLUMNS, {"mode": "int64"}),
-    )
+        self._labels.extend(label_rows(self.float_id, window, self.beacon_ids, index, probs))
+
+    def result(self) -> Estimate:
+        return Estimate(
+            kind=self.kind,
+            track=_frame(self._track, TRACK_COLUMNS, {"n_signals": "int64", "ambiguous": "bool"}),
+            labels=_frame(self._labels, LABEL_COLUMNS, {"rank": "int64"}),
+            modes=_frame(self._modes, MODE_COLUMNS, {"mode": "int64"}),
+        )
+
+
+def build_estimate(
+    float_id: str,
+    steps: Sequence[Step],
+    beacon_ids: NDArray,
+    ambiguity: AmbiguityConfig,
+    smoothed_weights: Sequence[NDArray] | None = None,
+    label_probs: LabelProbs | None = None,
+) -> Estimate:
+    """Tables for every window among `steps`: filtered (each step's own weights), or under
+    `smoothed_weights` (one array per step) with labels from `label_probs`."""
+    builder = EstimateBuilder(float_id, beacon_ids, ambiguity, "filtered" if smoothed_weights is None else "smoothed")
+    if smoothed_weights is None:
+        for step in steps:
+            builder.add(step)
+    else:
+        for step, weights in zip(steps, smoothed_weights, strict=True):
+            builder.add(step, weights, label_probs)
+    return builder.result()
 
 
 def runs_of(times: NDArray[np.datetime64], flags: NDArray[np.bool_]) -> list[tuple[np.datetime64, np.datetime64]]:

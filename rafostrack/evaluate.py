@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from .domain import ArrivalRecord
 from .geodesy import local_offsets_km, range_m
-from .inputs import ArrivalRecord
 
 
 def true_labels(record: ArrivalRecord) -> list[str | None]:

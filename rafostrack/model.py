@@ -28,10 +28,9 @@ from numpy.typing import NDArray
 from scipy.special import log_ndtr, ndtr
 
 from .config import ModelConfig
+from .domain import SECONDS_PER_DAY, BeaconTable, FloatInfo
 from .geodesy import range_m
-from .inputs import BeaconTable, FloatInfo
 
-SECONDS_PER_DAY = 86400.0
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
 
 

@@ -16,17 +16,11 @@ import numpy as np
 
 from . import __version__
 from .config import Config, load_config
+from .domain import ArrivalRecord, BeaconTable, FloatInfo
 from .errors import InputError, Warnings, nearest
-from .inputs import (
-    ArrivalRecord,
-    BeaconTable,
-    FloatInfo,
-    check_output_dir,
-    read_arrivals,
-    read_beacons,
-    read_floats,
-)
-from .outputs import file_digest, write_json, write_parquet
+from .io import read_arrivals, read_beacons, read_floats
+from .io.outdir import check_output_dir
+from .io.writers import file_digest, write_json, write_parquet
 from .tracker import TrackOutput, track_record
 
 MISSION_CONFIG = "rafostrack.toml"
@@ -90,8 +84,8 @@ def load_float(inputs: TrackInputs) -> LoadedFloat:
     else:
         info = _float_info(floats_path, inputs, config)
         record = read_arrivals(inputs.float_path, info, beacons, warnings)
-    if config.filter.method == "labeled" and not record.has_labels:
-        raise InputError(f"{inputs.float_path}: method 'labeled' needs a 'beacon_id' column of known labels")
+    if config.filter.likelihood == "labeled" and not record.has_labels:
+        raise InputError(f"{inputs.float_path}: likelihood 'labeled' needs a 'beacon_id' column of known labels")
     return LoadedFloat(config, beacons, info, record, warnings)
 
 
@@ -156,7 +150,9 @@ def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also
     for estimate, suffix in estimates:
         meta = {
             "version": __version__,
-            "method": config.filter.method,
+            "likelihood": config.filter.likelihood,
+            "engine": config.filter.engine,
+            "motion": config.motion.model,
             "estimate": estimate.kind,
             "config": config.to_dict(),
         }
@@ -184,7 +180,9 @@ def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, el
     return {
         "rafostrack_version": __version__,
         "float_id": loaded.info.float_id,
-        "method": loaded.config.filter.method,
+        "likelihood": loaded.config.filter.likelihood,
+        "engine": loaded.config.filter.engine,
+        "motion": loaded.config.motion.model,
         "estimate": output.estimate.kind,
         "inputs": {k: {"path": str(p), "sha256": file_digest(p)} for k, p in files.items()},
         "config_files": [str(p) for p in inputs.config_layers()],

@@ -26,10 +26,10 @@ from matplotlib.patches import Patch, Polygon
 from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
-from .atomic import atomic_path
 from .config import ModelConfig
+from .domain import BeaconTable, FloatInfo
 from .estimates import runs_of
-from .inputs import BeaconTable, FloatInfo
+from .io.atomic import atomic_path
 from .model import predicted_arrivals
 from .posterior import ELLIPSE_95_SCALE
 

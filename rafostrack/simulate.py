@@ -61,10 +61,10 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from .atomic import write_text_atomic
 from .config import ModelConfig, load_config, merge_layer
+from .domain import ArrivalRecord, BeaconTable, FloatInfo, Window
 from .geodesy import displace, local_offsets_km, wrap_lon
-from .inputs import ArrivalRecord, BeaconTable, FloatInfo, Window
+from .io.atomic import write_text_atomic
 from .model import beacon_ranges_m, detection_prob, predicted_toa_s, window_beacons
 
 TOA_RESOLUTION_S = 0.01

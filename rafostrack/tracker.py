@@ -1,18 +1,27 @@
-"""Track one float's record in memory: filter, smooth (unless disabled), summarise.
+"""The method assembled from its components: filter, smooth (unless disabled), summarise.
 
-This is the whole method without any file I/O; `pipeline` reads inputs and writes outputs
-around it, and tests, benchmarks and experiments call it directly.
+`Tracker.from_config` picks each component from its registry (motion model, arrival
+likelihood and its engine, resampling scheme); `Tracker.track` runs one float's record in
+memory, with no file I/O. `pipeline` reads inputs and writes outputs around it; tests,
+benchmarks and experiments call it directly.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
-from .config import Config
-from .estimates import Estimate, build_estimate
-from .filter import ParticleFilter, float_rng
-from .inputs import ArrivalRecord, BeaconTable, FloatInfo
+import numpy as np
+import pandas as pd
+
+from .config import AmbiguityConfig, Config
+from .domain import ArrivalRecord, BeaconTable, FloatInfo, PositionFix
+from .estimates import Estimate, EstimateBuilder, build_estimate
+from .filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
+from .likelihoods import ArrivalLikelihood, PositionFixLikelihood, arrivals_from_config
+from .motion import MotionModel, motion_from_config
+from .resampling import RESAMPLERS
 from .smoother import smooth
 
 
@@ -26,36 +35,91 @@ class TrackOutput:
     smoother_s: float
 
     @property
-    def track(self):
+    def track(self) -> pd.DataFrame:
         return self.estimate.track
 
     @property
-    def labels(self):
+    def labels(self) -> pd.DataFrame:
         return self.estimate.labels
+
+
+@dataclass(frozen=True)
+class Tracker:
+    """One float's tracker: its components and the few settings that join them."""
+
+    info: FloatInfo
+    beacon_ids: np.ndarray
+    motion: MotionModel
+    arrivals: ArrivalLikelihood
+    settings: FilterSettings
+    launch_sd_km: float
+    end_fix: PositionFix | None
+    smooth: bool
+    ambiguity: AmbiguityConfig
+    seed: int
+
+    @classmethod
+    def from_config(cls, config: Config, beacons: BeaconTable, info: FloatInfo) -> Tracker:
+        use_end = config.fixes.use_end_fix and info.has_end_fix
+        return cls(
+            info=info,
+            beacon_ids=beacons.beacon_id,
+            motion=motion_from_config(config.motion),
+            arrivals=arrivals_from_config(beacons, info, config),
+            settings=FilterSettings(
+                config.filter.particles, config.filter.resample_ess_fraction, RESAMPLERS[config.filter.resampling]
+            ),
+            launch_sd_km=config.fixes.launch_sd_km,
+            end_fix=PositionFix(info.end_time, info.end_lat, info.end_lon, config.fixes.end_sd_km) if use_end else None,
+            smooth=config.smoother.enabled,
+            ambiguity=config.ambiguity,
+            seed=config.filter.seed,
+        )
+
+    def run_filter(
+        self,
+        record: ArrivalRecord,
+        *,
+        label_probs: bool = True,
+        keep: bool = True,
+        on_step: Callable[[Step], None] | None = None,
+    ) -> FilterResult:
+        """The forward filter over the record (and the end fix), with the float's own
+        generator; see `ParticleFilter.run` for `keep` and `on_step`."""
+        info = self.info
+        fixes = PositionFixLikelihood(info.float_id)
+        pf = ParticleFilter(self.motion, self.arrivals, fixes, self.settings, label_probs=label_probs)
+        launch = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
+        events = observations(record.windows, self.end_fix)
+        return pf.run(launch, events, float_rng(self.seed, info.float_id), keep=keep, on_step=on_step)
+
+    def track(self, record: ArrivalRecord, *, also_filtered: bool = False) -> TrackOutput:
+        """Filter the record, then smooth if configured, and summarise.
+
+        Without smoothing, each step is summarised as the filter makes it and then dropped,
+        so memory does not grow with the record; smoothing needs every step's cloud (about
+        24 bytes per particle per window, 40 with a velocity)."""
+        float_id = self.info.float_id
+        started = time.perf_counter()
+        if not self.smooth:
+            builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered")
+            run = self.run_filter(record, keep=False, on_step=builder.add)
+            filtered = builder.result()
+            return TrackOutput(filtered, filtered, run.n_resamples, run.warnings, time.perf_counter() - started, 0.0)
+
+        run = self.run_filter(record, label_probs=also_filtered)
+        filter_s = time.perf_counter() - started
+        filtered = build_estimate(float_id, run.steps, self.beacon_ids, self.ambiguity) if also_filtered else None
+        started = time.perf_counter()
+        weights = smooth([s.cloud for s in run.steps], self.motion)
+        estimate = build_estimate(
+            float_id, run.steps, self.beacon_ids, self.ambiguity, weights, self.arrivals.label_probs
+        )
+        return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, time.perf_counter() - started)
 
 
 def track_record(
     beacons: BeaconTable, info: FloatInfo, config: Config, record: ArrivalRecord, *, also_filtered: bool = False
 ) -> TrackOutput:
-    """Filter the record with the float's own generator, then smooth if configured.
-
-    Without smoothing, each step is summarised as the filter makes it and then dropped, so
-    memory does not grow with the record; smoothing needs every step's cloud (about
-    24 bytes per particle per window)."""
-    rng = float_rng(config.filter.seed, info.float_id)
-    started = time.perf_counter()
-    if not config.smoother.enabled:  # no history needed: summarise each step as it is made
-        pf = ParticleFilter(beacons, info, config)
-        filtered = build_estimate(info.float_id, pf.steps(record, rng), pf, beacons, config.ambiguity)
-        filter_s = time.perf_counter() - started
-        return TrackOutput(filtered, filtered, pf.n_resamples, list(pf.warnings), filter_s, 0.0)
-
-    pf = ParticleFilter(beacons, info, config, label_probs=also_filtered)
-    run = pf.run(record, rng)
-    filter_s = time.perf_counter() - started
-    filtered = build_estimate(info.float_id, run.steps, pf, beacons, config.ambiguity) if also_filtered else None
-    started = time.perf_counter()
-    weights = smooth([s.cloud for s in run.steps], config.motion.diffusion_km_per_day)
-    estimate = build_estimate(info.float_id, run.steps, pf, beacons, config.ambiguity, weights)
-    smoother_s = time.perf_counter() - started
-    return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s)
+    """Track one float's record with the configured method (`Tracker.from_config(...).track`)."""
+    return Tracker.from_config(config, beacons, info).track(record, also_filtered=also_filtered)

@@ -175,11 +175,11 @@ def test_incremental_reprocesses_exactly_what_changed(work_tree, tmp_path):
     assert _summary(out)["m1", "sim3"]["reason"] == "floats.csv row changed"
 
     # The effective config changes (a flag): every float; --force redoes everything.
-    result = _batch(work_tree, out, "--method", "unranked")
+    result = _batch(work_tree, out, "--likelihood", "unranked")
     assert result.exit_code == 0, result.output
     assert _statuses(out)["processed"] == set(FLOATS)
     assert _summary(out)["m1", "sim1"]["reason"] == "config changed"
-    result = _batch(work_tree, out, "--method", "unranked", "--force", "--jobs", "2")
+    result = _batch(work_tree, out, "--likelihood", "unranked", "--force", "--jobs", "2")
     assert result.exit_code == 0, result.output
     assert _statuses(out)["processed"] == set(FLOATS)
     assert _summary(out)["m1", "sim1"]["reason"] == "forced"

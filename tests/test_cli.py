@@ -12,9 +12,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 from click.testing import CliRunner
+from support import copy_mission
 
 from rafostrack.cli import main
-from rafostrack.outputs import read_metadata
+from rafostrack.errors import InputError
+from rafostrack.io.writers import read_metadata
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +68,8 @@ def test_track_writes_every_output(mission_dir, tmp_path):
     assert list(labels.columns) == ["float_id", "time", "rank", "toa_s", "beacon_id", "prob", "p_clutter"]
 
     meta = read_metadata(out / "track.parquet")
-    assert meta["method"] == "exact" and meta["config"]["filter"]["particles"] == 300
+    assert meta["likelihood"] == "ranked" and meta["engine"] == "exact" and meta["motion"] == "random_walk"
+    assert meta["config"]["filter"]["particles"] == 300
     assert meta["estimate"] == "smoothed"
     run = json.loads((out / "run.json").read_text())
     assert run["counts"]["windows"] == len(track) and run["counts"]["toas"] == len(labels)
@@ -77,7 +80,7 @@ def test_track_writes_every_output(mission_dir, tmp_path):
 def test_mission_config_and_flags_are_layered(mission_dir, tmp_path):
     float_file = _float_file(mission_dir)
     cfg = tmp_path / "extra.toml"
-    cfg.write_text("[filter]\nparticles = 120\nmethod = 'bp'\n")
+    cfg.write_text("[filter]\nparticles = 120\nengine = 'bp'\n")
     args = [
         "track",
         str(float_file),
@@ -85,14 +88,14 @@ def test_mission_config_and_flags_are_layered(mission_dir, tmp_path):
         str(tmp_path),
         "--config",
         str(cfg),
-        "--method",
+        "--likelihood",
         "unranked",
         "--no-plots",
     ]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     run = json.loads((tmp_path / float_file.stem / "run.json").read_text())
-    assert run["method"] == "unranked" and run["config"]["filter"]["particles"] == 120
+    assert run["likelihood"] == "unranked" and run["engine"] == "bp" and run["config"]["filter"]["particles"] == 120
     assert str(mission_dir / "rafostrack.toml") in run["config_files"]
 
 
@@ -133,7 +136,11 @@ def test_launch_override_without_floats_table(mission_dir, tmp_path):
     ("args", "needle"),
     [
         (["track", "nope/float1.csv"], "nope/float1.csv: file not found"),
-        (["track", "{f}", "--method", "magic"], "Invalid value for '--method'"),
+        (["track", "{f}", "--engine", "magic"], "[filter] engine: must be one of exact, bp, got 'magic'"),
+        (
+            ["track", "{f}", "--method", "bp"],
+            "--method was split into two options: use --likelihood ranked --engine bp",
+        ),
         (["track", "{f}", "--launch", "abc"], "expected LAT,LON"),
         (["track", "{f}", "--clutter-rate", "-1"], "[model] clutter_rate: must be > 0"),
     ],
@@ -176,3 +183,85 @@ def test_outputs_do_not_depend_on_the_thread_count(mission_dir, tmp_path):
         subprocess.run(args, check=True, capture_output=True, env=env)
         digests.append({p.name: p.read_bytes() for p in sorted((out / float_file.stem).glob("*.parquet"))})
     assert digests[0] == digests[1]
+
+
+@pytest.mark.reliability
+@pytest.mark.parametrize(
+    ("file", "text", "needle"),
+    [
+        ("beacons.csv", "beacon_id,lat,lon\nB1,95,0\n", "beacons.csv: line 2: field 'lat': expected a finite value"),
+        ("beacons.csv", "beacon_id;lat;lon\nB1;1;2\n", "beacons.csv: line 1: columns are separated by ';'"),
+        ("floats.csv", "", "floats.csv: file is empty"),
+        ("sim1.csv", "time,toa_s\n2010-01-02,abc\n", "sim1.csv: line 2: field 'toa_s': expected a number"),
+        ("rafostrack.toml", "[model]\nclutter_rte = 1\n", "unknown key [model] clutter_rte (did you mean"),
+    ],
+)
+def test_cli_input_errors_exit_2_one_line_no_traceback(sim_mission_dir, tmp_path, file, text, needle):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    (m / file).write_text(text)
+    result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert result.stderr.startswith("rafostrack: error: ") and needle in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.output
+    assert not (tmp_path / "out" / "sim1").exists()  # nothing half-written
+
+
+@pytest.mark.reliability
+def test_cli_error_in_a_subprocess(sim_mission_dir, tmp_path):
+    """The installed entry point, as a user runs it: exit code 2, one line on stderr."""
+    exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
+    assert exe is not None
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    (m / "beacons.csv").write_text("beacon_id,lat,lon\nB1,-58,-100\nB1,-57,-100\n")
+    proc = subprocess.run(
+        [exe, "track", str(m / "sim1.csv"), "--out", str(tmp_path / "out")], capture_output=True, text=True, check=False
+    )
+    assert proc.returncode == 2
+    assert proc.stderr == (
+        f"rafostrack: error: {m / 'beacons.csv'}: line 3: duplicate beacon_id 'B1' (first on line 2); "
+        "field 'beacon_id': expected each id once\n"
+    )
+    assert proc.stdout == ""
+
+
+@pytest.mark.reliability
+def test_cli_debug_shows_the_traceback(sim_mission_dir, tmp_path):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    (m / "floats.csv").write_text("")
+    result = CliRunner().invoke(main, ["--debug", "track", str(m / "sim1.csv"), "--out", str(tmp_path / "out")])
+    assert isinstance(result.exception, InputError) and "file is empty" in str(result.exception)
+
+
+@pytest.mark.reliability
+def test_cli_warnings_listed_in_run_json_and_stderr(sim_mission_dir, tmp_path):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    arrivals = pd.read_csv(m / "sim1.csv", dtype=str, keep_default_na=False)
+    times = sorted(arrivals["time"].unique())
+    extra = pd.DataFrame(
+        {
+            "time": [times[3], times[5], *[times[7]] * 5],
+            "toa_s": [arrivals["toa_s"].iloc[0], "-12", "10", "20", "30", "40", "50"],
+            "beacon_id": [""] * 7,
+        }
+    )
+    pd.concat([arrivals, arrivals.iloc[:1], extra]).to_csv(m / "sim1.csv", index=False)
+    beacons = pd.read_csv(m / "beacons.csv", dtype=str, keep_default_na=False)
+    beacons["end"] = times[-3]  # every beacon stops: the last two windows have none
+    beacons.to_csv(m / "beacons.csv", index=False)
+
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(out), "--no-plots"])
+    assert result.exit_code == 0, result.output
+    run = json.loads((out / "sim1" / "run.json").read_text())
+    text = " | ".join(run["warnings"])
+    for needle in (
+        "duplicate row(s) (same time and toa_s) dropped",
+        "1 TOA(s) outside the window [0, 4200] s dropped (1 negative",
+        "held more than max_signals=4 TOAs; kept the earliest",
+        "2 window(s) with no active beacon",
+    ):
+        assert needle in text
+    assert run["counts"]["warnings"] == len(run["warnings"]) >= 4
+    printed = [line for line in result.stderr.splitlines() if line.startswith("rafostrack: warning: ")]
+    assert printed == [f"rafostrack: warning: {w}" for w in run["warnings"]]
+    assert f"rafostrack: {len(run['warnings'])} warning(s), also listed in {out / 'sim1' / 'run.json'}" in result.stderr

@@ -7,21 +7,20 @@ each beacon at most once and sums the products of the factors directly in float6
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
 
 import numpy as np
 import pytest
 from numpy.typing import NDArray
 
 from rafostrack.config import load_config
-from rafostrack.engines import Association, bp, exact
+from rafostrack.engines import ENGINES as REGISTERED
+from rafostrack.engines import Association, Engine, bp, exact
 from rafostrack.errors import InputError
 from rafostrack.model import association_factors
 
-ENGINES: dict[str, Callable[[NDArray, NDArray], Association]] = {
-    "exact": exact.associate,
-    "bp": bp.associate,
-}
+# Every registered engine, built from the default configuration (the registry is the list).
+ENGINES: dict[str, Engine] = {name: factory(load_config()) for name, factory in REGISTERED.items()}
+# Marginal tolerance against the oracle on tree-shaped graphs (where BP is exact too).
 MARGINAL_TOL = {"exact": 1e-9, "bp": 1e-6}
 
 
@@ -157,7 +156,7 @@ def test_bp_leave_one_out_sum_does_not_cancel() -> None:
 
 
 def test_exact_refuses_many_signals() -> None:
-    with pytest.raises(InputError, match="--method bp"):
+    with pytest.raises(InputError, match="--engine bp"):
         exact.associate(np.zeros((1, 2, 13)), np.zeros((1, 2)))
 
 

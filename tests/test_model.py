@@ -16,8 +16,8 @@ from scipy import integrate
 
 from rafostrack import model as m
 from rafostrack.config import load_config
+from rafostrack.domain import BeaconTable, FloatInfo
 from rafostrack.engines import exact
-from rafostrack.inputs import BeaconTable, FloatInfo
 
 NAT = np.datetime64("NaT", "ns")
 

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from rafostrack.config import load_config
-from rafostrack.inputs import BeaconTable, FloatInfo
+from rafostrack.domain import BeaconTable, FloatInfo
 from rafostrack.model import predicted_arrivals
 from rafostrack.plots import beacon_colors, write_plots
 

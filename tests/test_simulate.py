@@ -10,9 +10,10 @@ import pandas as pd
 import pytest
 
 from rafostrack.config import ModelConfig, load_config
+from rafostrack.domain import BeaconTable, FloatInfo
 from rafostrack.errors import Warnings
 from rafostrack.geodesy import local_offsets_km, range_m
-from rafostrack.inputs import BeaconTable, FloatInfo, read_arrivals, read_beacons, read_floats
+from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
 from rafostrack.model import predicted_arrivals
 from rafostrack.simulate import (
     SimulatedMission,

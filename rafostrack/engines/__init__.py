@@ -1,28 +1,22 @@
-"""Inference engines for the window's association sum.
+"""Inference engines for the window's association sum (see `base`).
 
-Each engine takes the factors of `rafostrack.model` (log w of shape (P, s, K), log u of
-shape (P, s)) and returns an `Association`: the log of
-    Z = sum over partial matchings M of prod_{(i,j) in M} w_ij prod_{i unmatched} u_i
-(the window's log-likelihood less the shared clutter term) and the marginal probability
-that signal j came from beacon i, per particle. Every engine accepts `marginals=False`,
-a hint that only log Z is wanted (the exact engine then skips its backward pass and
-returns NaN marginals).
+`ENGINES` maps the config's `[filter] engine` to the engine module's `from_config`:
+`exact` (dynamic programming over subsets of signals) and `bp` (loopy belief
+propagation, Bethe estimate). To add one, see ARCHITECTURE.md.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from ..config import Config
+from . import bp, exact
+from .base import Association, Engine, EngineFactory
 
-import numpy as np
-from numpy.typing import NDArray
+ENGINES: dict[str, EngineFactory] = {"exact": exact.from_config, "bp": bp.from_config}
 
 
-@dataclass(frozen=True)
-class Association:
-    log_z: NDArray[np.float64]  # (P,)
-    p_match: NDArray[np.float64]  # (P, s, K): P(signal j from beacon i | X)
+def engine_from_config(config: Config) -> Engine:
+    """The configured engine (`[filter] engine`)."""
+    return ENGINES[config.filter.engine](config)
 
-    @property
-    def p_clutter(self) -> NDArray[np.float64]:
-        """(P, K): probability that each signal is clutter."""
-        return np.clip(1.0 - self.p_match.sum(axis=1), 0.0, 1.0)
+
+__all__ = ["ENGINES", "Association", "Engine", "EngineFactory", "bp", "engine_from_config", "exact"]

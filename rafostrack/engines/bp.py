@@ -23,11 +23,14 @@ Messages are kept in linear scale, so log W_ij must stay below ~700 (float64 ran
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.special import xlog1py, xlogy
 
-from . import Association
+from ..config import Config
+from .base import Association, Engine
 
 
 def associate(
@@ -139,3 +142,8 @@ def bethe_free_energy(log_w: NDArray, b_match: NDArray) -> NDArray:
 def bethe_log_z(log_w: NDArray, b_match: NDArray) -> NDArray:
     """Bethe estimate -F(B) of log Z' (normalised weights), per particle."""
     return -bethe_free_energy(log_w, b_match)
+
+
+def from_config(config: Config) -> Engine:
+    """BP with the configured stopping rule (`[bp]`)."""
+    return partial(associate, tolerance=config.bp.tolerance, max_iterations=config.bp.max_iterations)

@@ -19,8 +19,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import Config
 from ..errors import InputError
-from . import Association
+from .base import Association, Engine
 
 MAX_SIGNALS = 12
 # Particles per chunk, so that the tables (s+1, chunk, 2^K) stay within ~64 MB.
@@ -43,7 +44,7 @@ def associate(log_match: NDArray, log_unheard: NDArray, *, marginals: bool = Tru
     if k > MAX_SIGNALS:
         raise InputError(
             f"the exact method handles at most {MAX_SIGNALS} stored signals per window "
-            f"(cost grows as 2^r); this window has {k}: use --method bp"
+            f"(cost grows as 2^r); this window has {k}: use --engine bp"
         )
     log_u_total = log_unheard.sum(axis=1)
     if k == 0 or s == 0:
@@ -97,3 +98,8 @@ def _associate_chunk(log_w: NDArray, k: int, marginals: bool) -> tuple[NDArray, 
                 pair = (_split(fwd[i], j, k)[0] * _split(bwd[i + 1], j, k)[1]).sum(axis=(0, 1))
                 p_match[:, i, j] = np.exp(np.log(pair) + log_w[:, i, j] + log_rel)
     return log_z, p_match
+
+
+def from_config(_config: Config) -> Engine:
+    """The exact engine (it has no settings)."""
+    return associate

@@ -27,7 +27,7 @@ import pandas as pd
 
 from .. import model as m
 from ..engines import bp, exact
-from ..motion import scatter
+from ..motion import RandomWalk
 from ..plots import save_png
 from ..resampling import normalise_log_weights
 from .common import (
@@ -72,7 +72,8 @@ def _level(task: tuple[float, int, int, int, float]) -> list[dict[str, Any]]:
         if window.n_signals == 0:
             continue
         lat0, lon0 = scenario.truth["lat"].iloc[k + 1], scenario.truth["lon"].iloc[k + 1]
-        lat, lon = scatter(np.full(particles, lat0), np.full(particles, lon0), cloud_km, rng)
+        cloud = RandomWalk(cloud_km).initial(lat0, lon0, cloud_km, particles, rng)
+        lat, lon = cloud.lat, cloud.lon
         wb = m.window_beacons(beacons, info, window.time)
         ranges = m.beacon_ranges_m(lat, lon, wb)
         f = m.association_factors(

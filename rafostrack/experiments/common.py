@@ -31,12 +31,12 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from .. import plots
-from ..atomic import write_text_atomic
-from ..config import Config, load_config, with_overrides
+from ..config import Config, load_config, method_overrides, with_overrides
+from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from ..evaluate import position_errors_km
 from ..geodesy import displace, local_offsets_km
-from ..inputs import ArrivalRecord, BeaconTable, FloatInfo
-from ..outputs import write_json
+from ..io.atomic import write_text_atomic
+from ..io.writers import write_json
 from ..plots import save_png
 from ..simulate import simulate_arrivals
 from ..tracker import TrackOutput, track_record
@@ -159,7 +159,7 @@ class PaperSetting:
             },
             motion={"diffusion_km_per_day": float(diffusion_km_per_day)},
             fixes={"launch_sd_km": self.launch_sd_km, "use_end_fix": False},
-            filter={"method": method, "particles": int(particles), "seed": int(seed)},
+            filter={**method_overrides(method), "particles": int(particles), "seed": int(seed)},
             smoother={"enabled": bool(smooth)},
         )
 
@@ -273,7 +273,7 @@ def run_method(
 ) -> MethodRun:
     """Track `record` with `method` (filtered, and smoothed when `smooth`) and score both
     against the scenario's truth in squared plane units."""
-    cfg = with_overrides(config, filter={"method": method}, smoother={"enabled": smooth})
+    cfg = with_overrides(config, filter=method_overrides(method), smoother={"enabled": smooth})
     out = track_record(scenario.beacons, scenario.info, cfg, record, also_filtered=True)
     unit2 = scenario.setting.unit_km**2
     err_f = position_errors_km(out.filtered.track, scenario.truth) ** 2 / unit2

@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..config import with_overrides
+from ..config import method_overrides, with_overrides
+from ..domain import ArrivalRecord
 from ..evaluate import association_accuracy, position_errors_km
-from ..inputs import ArrivalRecord
 from ..pipeline import TrackInputs, load_float
 from ..plots import date_axis, save_png
 from ..tracker import TrackOutput, track_record
@@ -77,7 +77,7 @@ def track_sample(task: tuple[str, str, int, int, int | None]) -> TrackOutput:
     """Track one sample float with `method` (smoothed, with the filtered estimate too)."""
     float_id, method, particles, seed, days = task
     loaded, record, config = load_sample(float_id, days)
-    config = with_overrides(config, filter={"method": method, "particles": particles, "seed": seed})
+    config = with_overrides(config, filter={**method_overrides(method), "particles": particles, "seed": seed})
     return track_record(loaded.beacons, loaded.info, config, record, also_filtered=True)
 
 

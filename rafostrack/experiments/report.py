@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..atomic import write_text_atomic
+from ..io.atomic import write_text_atomic
 from .common import DEFAULT_WORKERS, PaperSetting
 
 EXPERIMENTS = ("fig4_line", "fig5_spiral", "fig6b_clutter", "fig7_8_floats", "fig12_ambiguity", "bp_vs_exact")

@@ -1,0 +1,145 @@
+"""The domain: beacons, floats, listening windows, position fixes and particle clouds.
+
+Plain data, no I/O and no model: readers (`rafostrack.io`) build these, the model,
+filter and smoother consume them. Times are UTC `numpy.datetime64[ns]`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+NaT = np.datetime64("NaT", "ns")
+SECONDS_PER_DAY = 86400.0
+
+
+def days_between(start: np.datetime64, end: np.datetime64) -> float:
+    """(end - start) in days, as a float."""
+    return float((end - start) / np.timedelta64(1, "s")) / SECONDS_PER_DAY
+
+
+@dataclass(frozen=True)
+class BeaconTable:
+    """Moored sound sources: position, transmission offset, clock drift, active period."""
+
+    beacon_id: NDArray[np.object_]
+    lat: NDArray[np.float64]
+    lon: NDArray[np.float64]
+    offset_s: NDArray[np.float64]
+    drift_s_per_day: NDArray[np.float64]
+    start: NDArray[np.datetime64]
+    end: NDArray[np.datetime64]
+
+    def __len__(self) -> int:
+        return len(self.beacon_id)
+
+    def active_at(self, time: np.datetime64) -> NDArray[np.bool_]:
+        """Which beacons transmit at `time` (an empty start or end is open)."""
+        after_start = np.isnat(self.start) | (self.start <= time)
+        before_end = np.isnat(self.end) | (time <= self.end)
+        return after_start & before_end
+
+    def index_of(self) -> dict[str, int]:
+        return {b: i for i, b in enumerate(self.beacon_id)}
+
+
+@dataclass(frozen=True)
+class FloatInfo:
+    """One float's launch (and optional end) fix, clock offsets and storage limits."""
+
+    float_id: str
+    launch_time: np.datetime64
+    launch_lat: float
+    launch_lon: float
+    end_time: np.datetime64
+    end_lat: float
+    end_lon: float
+    clock_offset_start_s: float
+    clock_offset_end_s: float
+    window_s: float
+    max_signals: int
+
+    def clock_offset_s(self, time: NDArray[np.datetime64] | np.datetime64) -> NDArray[np.float64]:
+        """Float clock error (float clock minus true time), linear from launch to end."""
+        if np.isnat(self.end_time) or self.end_time <= self.launch_time:
+            return np.full(np.shape(time), self.clock_offset_start_s)
+        frac = (time - self.launch_time) / (self.end_time - self.launch_time)
+        return self.clock_offset_start_s + frac * (self.clock_offset_end_s - self.clock_offset_start_s)
+
+    @property
+    def has_end_fix(self) -> bool:
+        return not (np.isnat(self.end_time) or np.isnan(self.end_lat) or np.isnan(self.end_lon))
+
+
+@dataclass(frozen=True)
+class Window:
+    """One listening window: its opening time and the stored arrival times, ascending."""
+
+    time: np.datetime64
+    toa_s: NDArray[np.float64]
+    beacon_id: tuple[str | None, ...] | None = None  # known labels (None entry = clutter)
+
+    @property
+    def n_signals(self) -> int:
+        return len(self.toa_s)
+
+
+@dataclass(frozen=True)
+class ArrivalRecord:
+    """A float's listening windows in time order."""
+
+    float_id: str
+    path: Path
+    windows: tuple[Window, ...]
+
+    @property
+    def has_labels(self) -> bool:
+        return bool(self.windows) and self.windows[0].beacon_id is not None
+
+
+@dataclass(frozen=True)
+class PositionFix:
+    """A position known at a time (a GPS fix at launch or surfacing), sd per axis in km."""
+
+    time: np.datetime64
+    lat: float
+    lon: float
+    sd_km: float
+
+
+@dataclass(frozen=True)
+class Particles:
+    """Particle states: position (degrees) and, for velocity-persistent motion models, the
+    east/north velocity (km/day), shape (P, 2); None for position-only models."""
+
+    lat: NDArray[np.float64]
+    lon: NDArray[np.float64]
+    velocity_km_per_day: NDArray[np.float64] | None = None
+
+    def __len__(self) -> int:
+        return len(self.lat)
+
+    def take(self, index: NDArray[np.intp]) -> Particles:
+        """The particles at `index` (e.g. resampled ancestors), copied."""
+        vel = None if self.velocity_km_per_day is None else self.velocity_km_per_day[index]
+        return Particles(self.lat[index], self.lon[index], vel)
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """One step's weighted particles: states at `time` and normalised weights."""
+
+    time: np.datetime64
+    particles: Particles
+    weights: NDArray[np.float64]
+
+    @property
+    def lat(self) -> NDArray[np.float64]:
+        return self.particles.lat
+
+    @property
+    def lon(self) -> NDArray[np.float64]:
+        return self.particles.lon

@@ -1,0 +1,132 @@
+"""Arrival-time evidence of one listening window (paper section 2).
+
+Three evidence models, registered in `ARRIVAL_LIKELIHOODS` under the config's
+`[filter] likelihood`:
+
+- `ranked` (eqs. 14-18): the stored TOAs are the earliest of the window; the association
+  of beacons to signals is summed out by the configured engine (`rafostrack.engines`);
+- `unranked` (the paper's baseline, eq. 19): the same sum, but an unheard beacon costs
+  1 - Pd whatever its predicted arrival;
+- `labeled` (eq. 20): the arrival file's `beacon_id` column as known labels.
+
+The factors themselves (predicted arrivals, w_ij, u_i) are `rafostrack.model`'s.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import model as m
+from ..config import Config, ModelConfig
+from ..domain import BeaconTable, FloatInfo, Particles, Window
+from ..engines import Engine, engine_from_config
+from ..errors import InputError
+from .base import Evidence, Likelihood, outlier_scale
+
+# Particles carrying less than this fraction of the mass are left out when association
+# marginals are recomputed for a reweighted (smoothed) cloud.
+NEGLIGIBLE_MASS = 1e-6
+
+
+class ArrivalLikelihood(Likelihood):
+    """Evidence of a window's stored arrival times, for one float."""
+
+    def __init__(self, beacons: BeaconTable, info: FloatInfo, model: ModelConfig):
+        self.beacons = beacons
+        self.info = info
+        self.model = model
+
+    def label_probs(
+        self, particles: Particles, weights: NDArray, window: Window
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+        """Association marginals (s, K) of `window` under `weights` on `particles`, and the
+        beacon-table rows of their s rows.
+
+        Recomputes the per-particle marginals on the particles that carry all but a
+        negligible fraction of the mass (used for smoothed labels).
+        """
+        order = np.argsort(weights)[::-1]
+        cut = np.searchsorted(np.cumsum(weights[order]), 1.0 - NEGLIGIBLE_MASS) + 1
+        keep = np.sort(order[:cut])
+        evidence = self.evaluate(particles.take(keep), window)
+        w = weights[keep] / weights[keep].sum()
+        return np.einsum("p,psk->sk", w, evidence.p_match), evidence.beacon_index
+
+
+class RankedArrivals(ArrivalLikelihood):
+    """p(T_1..T_K | X): the association sum of the ranked model (or the unranked baseline)."""
+
+    def __init__(self, beacons: BeaconTable, info: FloatInfo, model: ModelConfig, engine: Engine, ranked: bool = True):
+        super().__init__(beacons, info, model)
+        self.engine = engine
+        self.ranked = ranked
+
+    def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
+        window = observation
+        wb = m.window_beacons(self.beacons, self.info, window.time)
+        ranges = m.beacon_ranges_m(particles.lat, particles.lon, wb)
+        factors = m.association_factors(
+            m.predicted_toa_s(ranges, wb, self.model),
+            m.detection_prob(ranges, self.model),
+            window.toa_s,
+            max_signals=self.info.max_signals,
+            window_s=self.info.window_s,
+            model=self.model,
+            ranked=self.ranked,
+        )
+        assoc = self.engine(factors.log_match, factors.log_unheard, marginals=marginals)
+        return Evidence(factors.log_base + assoc.log_z, wb.index, assoc.p_match)
+
+
+class LabelledArrivals(ArrivalLikelihood):
+    """Eq. (20) on the window's labelled beacons: prod over labelled TOAs of f(T_j - mu_{R_j}).
+
+    The active period is not enforced (the label says the beacon was heard); a labelled TOA
+    that no particle explains has its sd widened, with a warning.
+    """
+
+    def __init__(self, beacons: BeaconTable, info: FloatInfo, model: ModelConfig):
+        super().__init__(beacons, info, model)
+        self._beacon_row = beacons.index_of()
+
+    def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
+        window = observation
+        if window.beacon_id is None:
+            raise InputError(
+                f"likelihood 'labeled' needs a beacon_id column in the arrival file of {self.info.float_id}"
+            )
+        rows = np.array(sorted({self._beacon_row[b] for b in window.beacon_id if b is not None}), dtype=np.intp)
+        wb = m.window_beacons(self.beacons, self.info, window.time, index=rows)
+        mu = m.predicted_toa_s(m.beacon_ranges_m(particles.lat, particles.lon, wb), wb, self.model)
+        column = {int(r): c for c, r in enumerate(rows)}
+        label_index = np.array(
+            [column[self._beacon_row[b]] if b is not None else -1 for b in window.beacon_id], dtype=np.intp
+        )
+        p_match = np.zeros((len(particles), len(rows), window.n_signals))
+        labelled = np.flatnonzero(label_index >= 0)
+        p_match[:, label_index[labelled], labelled] = 1.0
+        nearest = np.full(window.n_signals, 0.0)
+        if len(labelled):
+            resid = window.toa_s[labelled][None, :] - mu[:, label_index[labelled]]
+            nearest[labelled] = np.abs(resid).min(axis=0) / self.model.toa_sigma_s
+        scale = outlier_scale(nearest)
+        warnings = tuple(
+            f"{self.info.float_id}: window {np.datetime_as_string(window.time, 's')}Z: TOA {window.toa_s[j]:g} s "
+            f"labelled {window.beacon_id[j]} is {nearest[j]:.0f} sd from every particle's prediction; "
+            f"its sd was widened {scale[j]:.1f}x"
+            for j in np.flatnonzero(scale > 1.0)
+        )
+        loglik = m.labeled_loglik(mu, window.toa_s, label_index, self.model, sigma_scale=scale)
+        return Evidence(loglik, wb.index, p_match, warnings)
+
+
+ArrivalFactory = Callable[[BeaconTable, FloatInfo, Config], ArrivalLikelihood]
+
+ARRIVAL_LIKELIHOODS: dict[str, ArrivalFactory] = {
+    "ranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), ranked=True),
+    "unranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), ranked=False),
+    "labeled": lambda b, i, c: LabelledArrivals(b, i, c.model),
+}

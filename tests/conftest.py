@@ -1,0 +1,32 @@
+"""Fixtures shared by the test modules (plain helpers are in support.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rafostrack.cli import main
+from rafostrack.config import load_config
+from rafostrack.simulate import SimulatedMission, simulate_mission, synthetic_scenario
+
+
+@pytest.fixture(scope="session")
+def sim_mission_dir(tmp_path_factory) -> Path:
+    """A small simulated mission directory (one float, `sim1`, 20 days) tracked with 200
+    particles (its rafostrack.toml says so). Copy it before changing it."""
+    out = tmp_path_factory.mktemp("mission")
+    result = CliRunner().invoke(main, ["simulate", str(out), "--days", "20", "--seed", "3"])
+    assert result.exit_code == 0, result.output
+    with open(out / "rafostrack.toml", "a") as fh:
+        fh.write("\n[filter]\nparticles = 200\n")
+    return out
+
+
+@pytest.fixture(scope="session")
+def sim_mission() -> SimulatedMission:
+    """One synthetic float, 60 days, clutter 1 per window: the tracker's own model."""
+    beacons, floats = synthetic_scenario(days=60, rng=7)
+    return simulate_mission(beacons, floats, load_config().model, np.random.default_rng(7))

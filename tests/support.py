@@ -1,0 +1,94 @@
+"""Helpers shared by the test modules: small CSV missions, error capture, fuzz settings.
+
+(Fixtures live in conftest.py; these are plain functions and constants.)
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import shutil
+from pathlib import Path
+
+import pytest
+
+from rafostrack.config import load_config
+from rafostrack.errors import InputError, Warnings
+from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
+
+try:
+    from hypothesis import HealthCheck, settings
+    from hypothesis import strategies as st
+except ImportError:  # pragma: no cover - hypothesis is a test dependency
+    st = None
+
+MODEL = load_config().model
+BEACONS = "beacon_id,lat,lon,offset_s,start,end\nA,-58,-100,0,,\nB,-56,-95,600,2009-01-01,\n"
+FLOATS = "float_id,launch_time,launch_lat,launch_lon,window_s,max_signals\nf1,2009-01-01T00:00:00Z,-57,-98,4000,3\n"
+ARRIVALS = "time,toa_s\n2009-01-02T00:00:00Z,100\n2009-01-02T00:00:00Z,700\n2009-01-03T00:00:00Z,\n"
+
+
+def write(path: Path, text: str, newline: str = "\n", bom: bool = False) -> Path:
+    path.write_bytes((b"\xef\xbb\xbf" if bom else b"") + text.replace("\n", newline).encode())
+    return path
+
+
+def read_small(tmp_path: Path, arrivals: str = ARRIVALS, beacons: str = BEACONS, floats: str = FLOATS):
+    """Read a small mission; returns (record, warnings)."""
+    table = read_beacons(write(tmp_path / "beacons.csv", beacons))
+    info = read_floats(write(tmp_path / "floats.csv", floats), MODEL)["f1"]
+    warnings = Warnings()
+    record = read_arrivals(write(tmp_path / "f1.csv", arrivals), info, table, warnings)
+    return record, warnings
+
+
+def error_of(func, *args) -> str:
+    with pytest.raises(InputError) as err:
+        func(*args)
+    message = str(err.value)
+    assert message and len(message.splitlines()) == 1
+    return message
+
+
+def daily_rows(start: str, days: int, toas: str = "100,700") -> str:
+    """Arrival rows: one window a day from `start`, each with the given TOAs."""
+    t0 = dt.datetime.fromisoformat(start)
+    rows = []
+    for d in range(days):
+        t = (t0 + dt.timedelta(days=d)).strftime("%Y-%m-%dT%H:%M:%SZ")
+        rows += [f"{t},{toa}" for toa in toas.split(",")]
+    return "time,toa_s\n" + "\n".join(rows) + "\n"
+
+
+def copy_mission(mission: Path, dest: Path) -> Path:
+    shutil.copytree(mission, dest)
+    return dest
+
+
+needs_hypothesis = pytest.mark.skipif(st is None, reason="hypothesis is not installed")
+
+
+def fuzz_settings(n: int = 200):
+    return settings(
+        max_examples=n,
+        deadline=None,
+        derandomize=True,
+        database=None,
+        suppress_health_check=list(HealthCheck),
+    )
+
+
+def only_input_error(func, *args) -> None:
+    try:
+        func(*args)
+    except InputError as exc:
+        message = str(exc)
+        assert message.strip() and len(message.splitlines()) == 1, repr(message)
+
+
+def timing_free(run: dict) -> dict:
+    """run.json without its wall-clock figures (top-level keys ending in `_s`)."""
+    return {k: v for k, v in run.items() if not k.endswith("_s")}
+
+
+def parquet_bytes(directory: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(directory.glob("*.parquet"))}
