@@ -21,6 +21,7 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check rafostrack tests benchmarks scripts
 	$(BIN)/ruff format --check rafostrack tests benchmarks scripts
+	$(BIN)/mypy
 
 format: $(STAMP)
 	$(BIN)/ruff format rafostrack tests benchmarks scripts

@@ -22,7 +22,9 @@ import numpy as np
 
 from rafostrack.batch import default_jobs
 from rafostrack.config import load_config
-from rafostrack.simulate import simulate_mission, synthetic_scenario, write_mission
+from rafostrack.io.mission_writer import write_mission
+from rafostrack.scenarios import synthetic_scenario
+from rafostrack.simulate import simulate_mission
 
 RAFOSTRACK = [sys.executable, "-c", "from rafostrack.cli import main; main()"]
 

@@ -194,7 +194,9 @@ def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> N
     import numpy as np
 
     from .config import load_config
-    from .simulate import dimes_scenario, simulate_mission, synthetic_scenario, write_mission
+    from .io.mission_writer import write_mission
+    from .scenarios import dimes_scenario, synthetic_scenario
+    from .simulate import simulate_mission
 
     config = load_config((config_file,) if config_file else (), _overrides(**flags))
     rng = np.random.default_rng(seed)

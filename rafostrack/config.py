@@ -231,7 +231,9 @@ def key_comment(section: str, key: str) -> str:
     """The comment above [section] key in default.toml, as one line (for help texts); keys
     on consecutive lines share the comment above the first of them."""
     text = resources.files("rafostrack").joinpath("default.toml").read_text(encoding="utf-8")
-    current, comment, after_key = None, [], False
+    current: str | None = None
+    comment: list[str] = []
+    after_key = False
     for line in text.splitlines():
         stripped = line.strip()
         if stripped.startswith("[") and stripped.endswith("]"):

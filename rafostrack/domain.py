@@ -18,7 +18,13 @@ SECONDS_PER_DAY = 86400.0
 
 def days_between(start: np.datetime64, end: np.datetime64) -> float:
     """(end - start) in days, as a float."""
-    return float((end - start) / np.timedelta64(1, "s")) / SECONDS_PER_DAY
+    return float(elapsed_days(np.asarray(end), start))
+
+
+def elapsed_days(times: NDArray[np.datetime64], epoch: NDArray[np.datetime64] | np.datetime64) -> NDArray[np.float64]:
+    """(times - epoch) in days, elementwise (via seconds, as float64)."""
+    seconds: NDArray[np.float64] = np.asarray(times - epoch) / np.timedelta64(1, "s")  # type: ignore[operator]
+    return seconds / SECONDS_PER_DAY
 
 
 @dataclass(frozen=True)
@@ -67,7 +73,7 @@ class FloatInfo:
         if np.isnat(self.end_time) or self.end_time <= self.launch_time:
             return np.full(np.shape(time), self.clock_offset_start_s)
         frac = (time - self.launch_time) / (self.end_time - self.launch_time)
-        return self.clock_offset_start_s + frac * (self.clock_offset_end_s - self.clock_offset_start_s)
+        return np.asarray(self.clock_offset_start_s + frac * (self.clock_offset_end_s - self.clock_offset_start_s))
 
     @property
     def has_end_fix(self) -> bool:

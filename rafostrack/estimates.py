@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from .config import AmbiguityConfig
 from .domain import Particles, Window
@@ -125,6 +125,8 @@ class EstimateBuilder:
             for k, (g, mw) in enumerate(((modes.first, modes.first_weight), (modes.second, modes.second_weight)), 1):
                 self._modes.append((self.float_id, window.time, k, g.lat, g.lon, mw, g.sd_km))
         if label_probs is None:
+            if step.label_probs is None:
+                raise ValueError("the filter kept no association marginals: give label_probs")
             probs, index = step.label_probs, step.beacon_index
         elif window.n_signals:
             probs, index = label_probs(cloud.particles, w, window)
@@ -161,7 +163,7 @@ def build_estimate(
     return builder.result()
 
 
-def runs_of(times: NDArray[np.datetime64], flags: NDArray[np.bool_]) -> list[tuple[np.datetime64, np.datetime64]]:
+def runs_of(times: NDArray[np.datetime64], flags: ArrayLike) -> list[tuple[np.datetime64, np.datetime64]]:
     """Maximal stretches of consecutive flagged windows (e.g. ambiguous ones), as (first, last) times."""
     edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(flags, dtype=int), [0]])))
     return [(times[a], times[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)]

@@ -29,11 +29,11 @@ def range_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) 
     GeographicLib).
     """
     f = WGS84_F
-    lat1, lon1, lat2, lon2 = (np.radians(np.asarray(v, dtype=float)) for v in (lat1, lon1, lat2, lon2))
-    b1 = np.arctan((1.0 - f) * np.tan(lat1))
-    b2 = np.arctan((1.0 - f) * np.tan(lat2))
+    phi1, lam1, phi2, lam2 = (np.radians(np.asarray(v, dtype=float)) for v in (lat1, lon1, lat2, lon2))
+    b1 = np.arctan((1.0 - f) * np.tan(phi1))
+    b2 = np.arctan((1.0 - f) * np.tan(phi2))
     # Haversine for the central angle: well conditioned at short range.
-    h = np.sin((b2 - b1) / 2.0) ** 2 + np.cos(b1) * np.cos(b2) * np.sin((lon2 - lon1) / 2.0) ** 2
+    h = np.sin((b2 - b1) / 2.0) ** 2 + np.cos(b1) * np.cos(b2) * np.sin((lam2 - lam1) / 2.0) ** 2
     sigma = 2.0 * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
     p = (b1 + b2) / 2.0
     q = (b2 - b1) / 2.0
@@ -55,15 +55,19 @@ def radii_of_curvature_m(lat_deg: ArrayLike) -> tuple[NDArray, NDArray]:
     return m, n
 
 
-def displace(lat_deg: NDArray, lon_deg: NDArray, east_km: NDArray, north_km: NDArray) -> tuple[NDArray, NDArray]:
+def displace(
+    lat_deg: ArrayLike, lon_deg: ArrayLike, east_km: ArrayLike, north_km: ArrayLike
+) -> tuple[NDArray, NDArray]:
     """Move points by small east/north displacements (km) in the local tangent plane."""
+    lat_deg, lon_deg = np.asarray(lat_deg, dtype=float), np.asarray(lon_deg, dtype=float)
+    east_km, north_km = np.asarray(east_km, dtype=float), np.asarray(north_km, dtype=float)
     m, n = radii_of_curvature_m(lat_deg)
     lat = lat_deg + np.degrees(north_km * 1e3 / m)
     lon = lon_deg + np.degrees(east_km * 1e3 / (n * np.cos(np.radians(lat_deg))))
     return lat, wrap_lon(lon)
 
 
-def local_offsets_km(lat_deg: NDArray, lon_deg: NDArray, lat0: float, lon0: float) -> tuple[NDArray, NDArray]:
+def local_offsets_km(lat_deg: ArrayLike, lon_deg: ArrayLike, lat0: float, lon0: float) -> tuple[NDArray, NDArray]:
     """East/north offsets (km) of points from (lat0, lon0) in its tangent plane."""
     m, n = radii_of_curvature_m(lat0)
     east = np.radians(wrap_lon(np.asarray(lon_deg) - lon0)) * n * np.cos(np.radians(lat0)) / 1e3

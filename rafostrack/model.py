@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from scipy.special import log_ndtr, ndtr
 
 from .config import ModelConfig
-from .domain import SECONDS_PER_DAY, BeaconTable, FloatInfo
+from .domain import BeaconTable, FloatInfo, elapsed_days
 from .geodesy import range_m
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
@@ -65,7 +65,7 @@ def window_beacons(
     if index is None:
         index = np.flatnonzero(beacons.active_at(time))
     epoch = np.where(np.isnat(beacons.start[index]), info.launch_time, beacons.start[index])
-    days = (time - epoch) / np.timedelta64(1, "s") / SECONDS_PER_DAY
+    days = elapsed_days(np.asarray(time), epoch)
     delay = beacons.offset_s[index] + beacons.drift_s_per_day[index] * days + info.clock_offset_s(time)
     return WindowBeacons(index, beacons.lat[index], beacons.lon[index], delay)
 

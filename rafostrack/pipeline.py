@@ -78,7 +78,7 @@ def load_float(inputs: TrackInputs) -> LoadedFloat:
     warnings = Warnings()
     floats_path = inputs.resolved_floats()
     if floats_path is None:  # --launch without floats.csv: launched at the first window
-        info = _info_from_launch(inputs, config)
+        info = _info_from_launch(inputs.float_id, inputs.launch, config)
         record = read_arrivals(inputs.float_path, info, beacons, warnings)
         info = dataclasses.replace(info, launch_time=record.windows[0].time)
     else:
@@ -102,15 +102,17 @@ def _float_info(floats_path: Path, inputs: TrackInputs, config: Config) -> Float
     return info
 
 
-def _info_from_launch(inputs: TrackInputs, config: Config) -> FloatInfo:
+def _info_from_launch(float_id: str, launch: tuple[float, float] | None, config: Config) -> FloatInfo:
     """The float's description from `--launch` alone; its launch time is set to the first
     window's once the file is read (here: the earliest time the readers accept)."""
+    if launch is None:
+        raise InputError(f"{float_id}: no floats.csv and no --launch LAT,LON; expected one of them")
     nat = np.datetime64("NaT", "ns")
     return FloatInfo(
-        float_id=inputs.float_id,
+        float_id=float_id,
         launch_time=EARLIEST_TIME,
-        launch_lat=inputs.launch[0],
-        launch_lon=inputs.launch[1],
+        launch_lat=launch[0],
+        launch_lon=launch[1],
         end_time=nat,
         end_lat=np.nan,
         end_lon=np.nan,
@@ -145,7 +147,7 @@ def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also
 
     out_dir = Path(out_root) / loaded.info.float_id
     estimates = [(output.estimate, "")]
-    if also_filtered and output.filtered is not output.estimate:
+    if also_filtered and output.filtered is not None and output.filtered is not output.estimate:
         estimates.append((output.filtered, "_filtered"))
     for estimate, suffix in estimates:
         meta = {

@@ -104,12 +104,13 @@ class Tracker:
         if not self.smooth:
             builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered")
             run = self.run_filter(record, keep=False, on_step=builder.add)
-            filtered = builder.result()
-            return TrackOutput(filtered, filtered, run.n_resamples, run.warnings, time.perf_counter() - started, 0.0)
+            estimate = builder.result()
+            return TrackOutput(estimate, estimate, run.n_resamples, run.warnings, time.perf_counter() - started, 0.0)
 
         run = self.run_filter(record, label_probs=also_filtered)
         filter_s = time.perf_counter() - started
         filtered = build_estimate(float_id, run.steps, self.beacon_ids, self.ambiguity) if also_filtered else None
+
         started = time.perf_counter()
         weights = smooth([s.cloud for s in run.steps], self.motion)
         estimate = build_estimate(

@@ -1,11 +1,13 @@
-"""Generate the sample mission in data/samples/ (simulated arrivals on the real DIMES geometry).
+"""Generate the sample mission (simulated arrivals on the real DIMES geometry).
+
+It lives in rafostrack/data/samples/ (package data; data/samples is a link to it).
 
 The DIMES floats 759, 767 and 811 drift between their real launch and recovery fixes;
 the 12 sound sources have their real positions, transmission slots and deployment dates;
 the arrival times are simulated with `rafostrack.simulate` (see its module docstring) under
 the default model except `detection_range_km` (1000 km, the DIMES source range).
 
-    python scripts/make_sample.py          # writes data/samples/ (also: make sample)
+    python scripts/make_sample.py          # writes rafostrack/data/samples/ (also: make sample)
     python scripts/make_sample.py /tmp/m   # elsewhere
 """
 
@@ -17,9 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from rafostrack.config import load_config
-from rafostrack.simulate import dimes_scenario, simulate_mission, summarize, write_mission
+from rafostrack.io.mission_writer import write_mission
+from rafostrack.scenarios import dimes_scenario
+from rafostrack.simulate import simulate_mission, summarize
 
-DEFAULT_OUTDIR = Path(__file__).resolve().parents[1] / "data" / "samples"
+DEFAULT_OUTDIR = Path(__file__).resolve().parents[1] / "rafostrack" / "data" / "samples"
 SEED = 20090123
 FLOATS = ("759", "767", "811")
 

@@ -10,7 +10,8 @@ from click.testing import CliRunner
 
 from rafostrack.cli import main
 from rafostrack.config import load_config
-from rafostrack.simulate import SimulatedMission, simulate_mission, synthetic_scenario
+from rafostrack.scenarios import synthetic_scenario
+from rafostrack.simulate import SimulatedMission, simulate_mission
 
 
 @pytest.fixture(scope="session")

@@ -27,7 +27,9 @@ from click.testing import CliRunner
 from rafostrack import batch as b
 from rafostrack.cli import main
 from rafostrack.config import load_config
-from rafostrack.simulate import simulate_mission, synthetic_scenario, write_mission
+from rafostrack.io.mission_writer import write_mission
+from rafostrack.scenarios import synthetic_scenario
+from rafostrack.simulate import simulate_mission
 
 MISSIONS = ("deep/m2", "m1")
 FLOATS = [(m, f"sim{i}") for m in MISSIONS for i in (1, 2, 3)]

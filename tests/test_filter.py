@@ -7,7 +7,8 @@ import numpy as np
 from rafostrack.config import load_config, with_overrides
 from rafostrack.likelihoods import RankedArrivals
 from rafostrack.posterior import summarise
-from rafostrack.simulate import simulate_mission, synthetic_scenario
+from rafostrack.scenarios import synthetic_scenario
+from rafostrack.simulate import simulate_mission
 from rafostrack.tracker import Tracker, track_record
 
 

@@ -14,15 +14,10 @@ from rafostrack.domain import BeaconTable, FloatInfo
 from rafostrack.errors import Warnings
 from rafostrack.geodesy import local_offsets_km, range_m
 from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
+from rafostrack.io.mission_writer import write_mission
 from rafostrack.model import predicted_arrivals
-from rafostrack.simulate import (
-    SimulatedMission,
-    dimes_scenario,
-    simulate_mission,
-    summarize,
-    synthetic_scenario,
-    write_mission,
-)
+from rafostrack.scenarios import dimes_scenario, synthetic_scenario
+from rafostrack.simulate import SimulatedMission, simulate_mission, summarize
 
 DEFAULT_MODEL = load_config().model
 NAT = np.datetime64("NaT", "ns")

@@ -1,15 +1,6 @@
-"""The ranked-signal paper's experiments (section 3, appendix A.3), redone with rafostrack.
+"""The papers' experiments, redone with rafostrack (`make figures`).
 
-One module per figure, each with `run(outdir, *, quick=False, seed=...) -> dict` writing its
-PNG(s), the CSVs behind them and a JSON summary, and runnable alone as
-`python -m rafostrack.experiments.<module> OUTDIR [--quick]`:
-
-- `fig4_line`, `fig5_spiral`: one target on a line / a spiral, its track and labelled arrivals;
-- `fig6b_clutter`: MSE against the clutter parameter lambda, ranked vs the unranked baseline;
-- `fig7_8_floats`: sample floats 767 and 811, ours vs the labelled filter vs the truth;
-- `fig12_ambiguity`: float 759 with several seeds, where the position is not determined;
-- `bp_vs_exact`: the paper's BP association against the exact sum, and their cost.
-
-`common` holds the paper's planar setting mapped onto the ellipsoid and the shared runner;
-`report` runs them all and writes REPORT.md (`python -m rafostrack.experiments`).
+One subpackage per paper (`ranked`: the ranked-signal tracking paper), one module per
+figure or table; `common` holds what they share and `runner` runs them and builds the
+reports (`python -m rafostrack.experiments`).
 """

@@ -1,6 +1,6 @@
-"""`python -m rafostrack.experiments [--quick] [--out figures]`: every paper figure and REPORT.md."""
+"""`python -m rafostrack.experiments [--quick] [--out figures]`: every paper's experiments and reports."""
 
-from rafostrack.experiments.report import main
+from rafostrack.experiments.runner import main
 
 if __name__ == "__main__":
     main()

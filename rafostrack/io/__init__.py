@@ -71,8 +71,8 @@ def reader_for(kind: Kind, path: Path, fmt: str | None = None) -> Reader:
     for r in candidates:
         if r.matches(Path(path)):
             return r
-    known = "; ".join(f"{r.format} ({r.description})" for r in candidates)
-    raise InputError(f"{path}: not a {kind} file of a known format; expected one of: {known}")
+    listing = "; ".join(f"{r.format} ({r.description})" for r in candidates)
+    raise InputError(f"{path}: not a {kind} file of a known format; expected one of: {listing}")
 
 
 def read_beacons(path: Path, fmt: str | None = None) -> BeaconTable:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ..config import ModelConfig
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo, Window
@@ -148,7 +148,7 @@ def read_floats(path: Path, model: ModelConfig) -> dict[str, FloatInfo]:
 # <float_id>.csv
 
 
-def _list_runs(times: NDArray[np.datetime64], flagged: NDArray[np.bool_]) -> str:
+def _list_runs(times: NDArray[np.datetime64], flagged: ArrayLike) -> str:
     """Consecutive flagged windows as 'T' or 'T1 to T2 (n windows)', the first few of them."""
     idx = np.flatnonzero(flagged)
     runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
@@ -186,7 +186,7 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
         unknown = ((frame["beacon_id"] != "") & ~frame["beacon_id"].isin(known)).to_numpy()
         if unknown.any():
             row = int(np.argmax(unknown))
-            lab = labels[row]
+            lab = str(frame["beacon_id"].iloc[row])
             hint = nearest(lab, known) or " (expected a beacon_id of the beacons table or empty for clutter)"
             raise InputError(f"{path}: line {lines[row]}: field 'beacon_id': unknown beacon {lab!r}{hint}")
     first = int(np.argmin(times))
@@ -260,11 +260,10 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
     toa_stored = toa[order][stored]
     splits = np.cumsum(n_stored)[:-1]
     toa_groups = np.split(toa_stored, splits)
-    if labelled:
+    label_tuples: list[tuple[str | None, ...] | None] = [None] * n_win
+    if labels is not None:
         lab_groups = np.split(labels[order][stored], splits)
         label_tuples = [tuple(lab if lab else None for lab in g) for g in lab_groups]
-    else:
-        label_tuples = [None] * n_win
     windows = tuple(
         Window(time=t, toa_s=g, beacon_id=lab) for t, g, lab in zip(win_times, toa_groups, label_tuples, strict=True)
     )

@@ -52,6 +52,8 @@ class ArrivalLikelihood(Likelihood):
         cut = np.searchsorted(np.cumsum(weights[order]), 1.0 - NEGLIGIBLE_MASS) + 1
         keep = np.sort(order[:cut])
         evidence = self.evaluate(particles.take(keep), window)
+        if evidence.p_match is None:
+            raise ValueError(f"{type(self).__name__} gives no association marginals")
         w = weights[keep] / weights[keep].sum()
         return np.einsum("p,psk->sk", w, evidence.p_match), evidence.beacon_index
 

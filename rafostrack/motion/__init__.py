@@ -11,7 +11,7 @@ from .base import LinearGaussian, MotionModel
 from .ou import IntegratedOU
 from .random_walk import RandomWalk
 
-MOTION_MODELS: dict[str, type] = {RandomWalk.name: RandomWalk, IntegratedOU.name: IntegratedOU}
+MOTION_MODELS: dict[str, type[MotionModel]] = {RandomWalk.name: RandomWalk, IntegratedOU.name: IntegratedOU}
 
 
 def motion_from_config(cfg: MotionConfig) -> MotionModel:

@@ -22,6 +22,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import MotionConfig
 from ..domain import Particles
 from ..geodesy import displace
 
@@ -67,6 +68,11 @@ class MotionModel(ABC):
         """Tangent-plane state dimension: 2 (position) or 4 (position and velocity)."""
         return 4 if self.has_velocity else 2
 
+    @classmethod
+    @abstractmethod
+    def from_config(cls, cfg: MotionConfig) -> MotionModel:
+        """The model with the `[motion]` settings it uses."""
+
     @abstractmethod
     def transition(self, dt_days: float) -> LinearGaussian:
         """A(dt), b(dt) and the noise factor L(dt) of the exact transition over `dt_days` (>= 0)."""
@@ -94,6 +100,8 @@ class MotionModel(ABC):
         n = len(particles)
         state = np.zeros((tr.dim, n))
         if self.has_velocity:
+            if particles.velocity_km_per_day is None:
+                raise ValueError(f"motion model {self.name!r} needs particles with a velocity")
             state[2:] = particles.velocity_km_per_day.T
         # No BLAS: einsum's own loops give the same bits whatever the thread count.
         moved = np.einsum("ij,jp->ip", tr.A, state) + tr.b[:, None] + np.einsum("ij,jp->ip", tr.L, noise)

@@ -1,7 +1,7 @@
 """Paper Fig. 4: a target moving in a straight line, 10 beacons, first 4 signals, Pd 0.7,
 sigma 0.02, clutter Poisson(4): true vs estimated track, and the labelled arrival times.
 
-    python -m rafostrack.experiments.fig4_line OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked.fig4_line OUTDIR [--quick] [--seed N]
 """
 
 from __future__ import annotations
@@ -9,7 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from .common import DEFAULT_WORKERS, TrajectorySizes, cli, run_trajectory
+from ..common import DEFAULT_WORKERS, cli
+from .trajectory import TrajectorySizes, run_trajectory
 
 NAME = "fig4_line"
 FULL = TrajectorySizes(days=60, particles=1000)
@@ -35,6 +36,6 @@ def run(
 
 
 if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments import fig4_line as _module
+    from rafostrack.experiments.ranked import fig4_line as _module
 
     cli(_module.run, _module.__doc__)

@@ -11,7 +11,7 @@ into two separated modes (README, "Ambiguity"). Reported: the days flagged per r
 between-seed spread (RMS distance of the runs' positions from their mean) and the
 posterior sd, over the days with fewer than 3 true signals stored and elsewhere.
 
-    python -m rafostrack.experiments.fig12_ambiguity OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked.fig12_ambiguity OUTDIR [--quick] [--seed N]
 """
 
 from __future__ import annotations
@@ -24,22 +24,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..estimates import runs_of
-from ..evaluate import position_errors_km
-from ..geodesy import local_offsets_km
-from ..plots import date_axis, save_png
-from .common import (
-    DEFAULT_WORKERS,
-    cli,
-    figure,
-    pmap,
-    resolve_sizes,
-    save_csv,
-    save_summary,
-    span_text,
-    true_signal_counts,
-)
+from ...estimates import runs_of
+from ...evaluate import position_errors_km
+from ...geodesy import local_offsets_km
+from ...plots import date_axis, save_png
+from ..common import DEFAULT_WORKERS, cli, figure, pmap, resolve_sizes, save_csv, save_summary
 from .fig7_8_floats import load_sample, read_truth, track_sample
+from .setting import span_text, true_signal_counts
 
 NAME = "fig12_ambiguity"
 FLOAT_ID = "float759"
@@ -249,6 +240,6 @@ def _draw(path: Path, table: pd.DataFrame, seeds: list[int], particles: int, few
 
 
 if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments import fig12_ambiguity as _module
+    from rafostrack.experiments.ranked import fig12_ambiguity as _module
 
     cli(_module.run, _module.__doc__)

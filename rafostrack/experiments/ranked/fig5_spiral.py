@@ -2,7 +2,7 @@
 (10 beacons, first 4 signals, Pd 0.7, sigma 0.02, clutter Poisson(4)): true vs estimated
 track, and the labelled arrival times.
 
-    python -m rafostrack.experiments.fig5_spiral OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked.fig5_spiral OUTDIR [--quick] [--seed N]
 """
 
 from __future__ import annotations
@@ -10,7 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from .common import DEFAULT_WORKERS, TrajectorySizes, cli, run_trajectory
+from ..common import DEFAULT_WORKERS, cli
+from .trajectory import TrajectorySizes, run_trajectory
 
 NAME = "fig5_spiral"
 FULL = TrajectorySizes(days=120, particles=1000)
@@ -36,6 +37,6 @@ def run(
 
 
 if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments import fig5_spiral as _module
+    from rafostrack.experiments.ranked import fig5_spiral as _module
 
     cli(_module.run, _module.__doc__)

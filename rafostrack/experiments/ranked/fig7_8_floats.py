@@ -7,7 +7,7 @@ times, true labels standing in for the hand labels), read with `rafostrack.pipel
 tracked with its `rafostrack.toml` model settings (the ones the arrivals were simulated
 with). Both methods use the launch and recovery fixes, as `rafostrack track` does.
 
-    python -m rafostrack.experiments.fig7_8_floats OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked.fig7_8_floats OUTDIR [--quick] [--seed N]
 """
 
 from __future__ import annotations
@@ -20,23 +20,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..config import method_overrides, with_overrides
-from ..domain import ArrivalRecord
-from ..evaluate import association_accuracy, position_errors_km
-from ..pipeline import TrackInputs, load_float
-from ..plots import date_axis, save_png
-from ..tracker import TrackOutput, track_record
-from .common import (
-    DEFAULT_WORKERS,
-    ONE_DAY,
-    SAMPLES,
-    cli,
-    figure,
-    pmap,
-    resolve_sizes,
-    save_csv,
-    save_summary,
-)
+from ...config import method_overrides, with_overrides
+from ...domain import ArrivalRecord
+from ...evaluate import association_accuracy, position_errors_km
+from ...pipeline import TrackInputs, load_float
+from ...plots import date_axis, save_png
+from ...tracker import TrackOutput, track_record
+from ..common import DEFAULT_WORKERS, cli, figure, pmap, resolve_sizes, save_csv, save_summary
+from .setting import ONE_DAY, SAMPLES
 
 NAME = "fig7_8_floats"
 RUNNING_DAYS = 15
@@ -220,6 +211,6 @@ def _draw(path: Path, fid: str, fig_name: str, table: pd.DataFrame, particles: i
 
 
 if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments import fig7_8_floats as _module
+    from rafostrack.experiments.ranked import fig7_8_floats as _module
 
     cli(_module.run, _module.__doc__)

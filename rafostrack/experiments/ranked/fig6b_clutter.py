@@ -10,7 +10,7 @@ repeats, its standard error (sd / sqrt(R)), the median, and the fraction of wind
 the error exceeds 0.1 units (the target lost); and the paired difference unranked - exact
 with its standard error.
 
-    python -m rafostrack.experiments.fig6b_clutter OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked.fig6b_clutter OUTDIR [--quick] [--seed N]
 """
 
 from __future__ import annotations
@@ -23,22 +23,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..plots import save_png
-from .common import (
-    CLUTTER_LEVELS,
-    DEFAULT_WORKERS,
-    LOST_UNITS,
-    cli,
-    data_rng,
-    figure,
-    make_scenario,
-    mean_se,
-    pmap,
-    resolve_sizes,
-    run_method,
-    save_csv,
-    save_summary,
-)
+from ...plots import save_png
+from ..common import DEFAULT_WORKERS, cli, figure, mean_se, pmap, resolve_sizes, save_csv, save_summary
+from .setting import CLUTTER_LEVELS, LOST_UNITS, data_rng, make_scenario, run_method
 
 NAME = "fig6b_clutter"
 # (method, smoothed too?): BP is filtered only, as in the paper.
@@ -245,6 +232,6 @@ def _draw(path: Path, agg: pd.DataFrame, sz: Sizes, step_km: float) -> None:
 
 
 if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments import fig6b_clutter as _module
+    from rafostrack.experiments.ranked import fig6b_clutter as _module
 
     cli(_module.run, _module.__doc__)

@@ -1,4 +1,4 @@
-"""Paper-figure experiments at tiny size: every script runs, writes its files, and reports
+"""The ranked-signal paper's experiments at tiny size: every script runs, writes its files, and reports
 sane numbers (so that `make figures` cannot rot)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from rafostrack.evaluate import position_errors_km
-from rafostrack.experiments import (
+from rafostrack.experiments.ranked import (
     bp_vs_exact,
     fig4_line,
     fig5_spiral,
@@ -21,7 +21,8 @@ from rafostrack.experiments import (
     fig12_ambiguity,
     report,
 )
-from rafostrack.experiments.common import PaperSetting, line_xy, make_scenario, spiral_xy
+from rafostrack.experiments.ranked.setting import PaperSetting, line_xy, make_scenario, spiral_xy
+from rafostrack.experiments.runner import paper_main
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -149,7 +150,7 @@ def test_bp_vs_exact(outdir):
 
 def test_report_from_summaries(outdir):
     # runs after the experiments above (pytest keeps file order): rebuild from their JSON
-    report.main(["--out", str(outdir), "--report-only"])
+    paper_main("ranked", ["--out", str(outdir), "--report-only"])
     text = (outdir / "REPORT.md").read_text()
     for name in report.EXPERIMENTS:
         assert f"{name}" in text

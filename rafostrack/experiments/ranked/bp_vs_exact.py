@@ -12,7 +12,7 @@ the error in the particle filter's normalised weights (total variation distance 
 window), the association-marginal error max |p_bp - p_exact| per window, BP sweeps, and the
 median wall time per call (all particles) of each engine.
 
-    python -m rafostrack.experiments.bp_vs_exact OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked.bp_vs_exact OUTDIR [--quick] [--seed N]
 """
 
 from __future__ import annotations
@@ -25,23 +25,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .. import model as m
-from ..engines import bp, exact
-from ..motion import RandomWalk
-from ..plots import save_png
-from ..resampling import normalise_log_weights
-from .common import (
-    CLUTTER_LEVELS,
-    DEFAULT_WORKERS,
-    cli,
-    data_rng,
-    figure,
-    make_scenario,
-    pmap,
-    resolve_sizes,
-    save_csv,
-    save_summary,
-)
+from ... import model as m
+from ...engines import bp, exact
+from ...motion import RandomWalk
+from ...plots import save_png
+from ...resampling import normalise_log_weights
+from ..common import DEFAULT_WORKERS, cli, figure, pmap, resolve_sizes, save_csv, save_summary
+from .setting import CLUTTER_LEVELS, data_rng, make_scenario
 
 NAME = "bp_vs_exact"
 
@@ -227,6 +217,6 @@ def _draw(path: Path, raw: pd.DataFrame, agg: pd.DataFrame, sz: Sizes) -> None:
 
 
 if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments import bp_vs_exact as _module
+    from rafostrack.experiments.ranked import bp_vs_exact as _module
 
     cli(_module.run, _module.__doc__)
