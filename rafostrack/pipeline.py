@@ -164,9 +164,7 @@ def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also
     if plots:
         from .plots import write_plots
 
-        write_plots(
-            out_dir, output.track, output.labels, loaded.beacons, loaded.info, config.model, modes=output.estimate.modes
-        )
+        write_plots(out_dir, output.estimate, loaded.beacons, loaded.info, config.model)
     run = run_record(inputs, loaded, output, elapsed)
     write_json(out_dir / "run.json", run)
     return TrackResult(loaded.info.float_id, out_dir, output, run)

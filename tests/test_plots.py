@@ -11,6 +11,7 @@ import pytest
 
 from rafostrack.config import load_config
 from rafostrack.domain import BeaconTable, FloatInfo
+from rafostrack.estimates import MODE_COLUMNS, Estimate
 from rafostrack.model import predicted_arrivals
 from rafostrack.plots import beacon_colors, write_plots
 
@@ -119,17 +120,21 @@ def assert_pngs(outdir: Path, paths: list[Path]) -> None:
     assert sorted(f.name for f in outdir.iterdir()) == sorted(NAMES)  # no temporary files left
 
 
+def _estimate(track: pd.DataFrame, labels: pd.DataFrame) -> Estimate:
+    return Estimate("smoothed", track, labels, pd.DataFrame(columns=list(MODE_COLUMNS)))
+
+
 def test_write_plots_full(tmp_path, beacons, info, model):
     track = make_track(30)
     labels = make_labels(track, beacons, info, model)
     truth = track[["time", "lat", "lon"]].assign(lat=track.lat + 0.05)
-    paths = write_plots(tmp_path / "out", track, labels, beacons, info, model, truth=truth)
+    paths = write_plots(tmp_path / "out", _estimate(track, labels), beacons, info, model, truth=truth)
     assert_pngs(tmp_path / "out", paths)
 
 
 @pytest.mark.filterwarnings("error")
 def test_write_plots_empty_labels(tmp_path, beacons, info, model):
-    paths = write_plots(tmp_path, make_track(30), empty_labels(), beacons, info, model)
+    paths = write_plots(tmp_path, _estimate(make_track(30), empty_labels()), beacons, info, model)
     assert_pngs(tmp_path, paths)
 
 
@@ -138,7 +143,7 @@ def test_write_plots_single_window_all_clutter_nan_sd(tmp_path, beacons, info, m
     track = make_track(1, sd=None)
     labels = make_labels(track, beacons, info, model).assign(beacon_id=None, prob=0.7)
     labels.loc[0, "beacon_id"] = np.nan  # clutter may also come back as NaN from a file
-    paths = write_plots(tmp_path, track, labels, beacons, info, model)
+    paths = write_plots(tmp_path, _estimate(track, labels), beacons, info, model)
     assert_pngs(tmp_path, paths)
 
 
@@ -146,7 +151,7 @@ def test_write_plots_empty_track_overwrites(tmp_path, beacons, info, model):
     no_end = FloatInfo(**{**info.__dict__, "end_time": NAT, "end_lat": np.nan, "end_lon": np.nan})
     for name in NAMES:  # stale output from an earlier run is replaced
         (tmp_path / name).write_bytes(b"old")
-    paths = write_plots(tmp_path, make_track(0), empty_labels(), beacons, no_end, model)
+    paths = write_plots(tmp_path, _estimate(make_track(0), empty_labels()), beacons, no_end, model)
     assert_pngs(tmp_path, paths)
 
 

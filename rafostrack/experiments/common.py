@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import math
 import multiprocessing
 import os
+import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -68,6 +70,28 @@ def figure(width: float, height: float) -> contextlib.AbstractContextManager[Fig
 def save_csv(frame: pd.DataFrame, path: Path) -> Path:
     write_text_atomic(path, frame.to_csv(index=False, float_format="%.6g", lineterminator="\n"))
     return Path(path)
+
+
+def experiment(full: Any, quick_sizes: Any) -> Callable[[Callable[..., dict[str, Any]]], Callable[..., dict[str, Any]]]:
+    """Decorator for an experiment `run(outdir, sz, **options) -> summary`, where `sz` are its
+    sizes. It becomes `run(outdir, *, quick=False, sizes=None, **options)`: `sz` is `full`,
+    or `quick_sizes` with `quick`, with the fields in `sizes` replaced (tests use tiny
+    sizes); the summary gets `quick` and the wall time (`seconds`) and is written as
+    `<outdir>/<name>.json`, which the paper's report is built from."""
+
+    def decorate(run: Callable[..., dict[str, Any]]) -> Callable[..., dict[str, Any]]:
+        @functools.wraps(run)
+        def wrapper(
+            outdir: str | Path, *, quick: bool = False, sizes: dict[str, Any] | None = None, **options: Any
+        ) -> dict[str, Any]:
+            started = time.perf_counter()
+            summary = run(Path(outdir), resolve_sizes(quick_sizes if quick else full, sizes), **options)
+            summary.update(quick=quick, seconds=round(time.perf_counter() - started, 1))
+            return save_summary(summary, Path(outdir))
+
+        return wrapper
+
+    return decorate
 
 
 def save_summary(summary: dict[str, Any], outdir: Path) -> dict[str, Any]:

@@ -7,11 +7,11 @@ share (atomic PNG writing, colours, date axes), which the experiments use too.
 from __future__ import annotations
 
 from pathlib import Path
-
-import pandas as pd
+from typing import Any
 
 from ..config import ModelConfig
 from ..domain import BeaconTable, FloatInfo
+from ..estimates import Estimate
 from .arrivals import plot_arrivals
 from .base import beacon_colors, date_axis, figure, save_png
 from .track_map import plot_track
@@ -30,20 +30,14 @@ __all__ = [
 
 
 def write_plots(
-    outdir: Path,
-    track: pd.DataFrame,
-    labels: pd.DataFrame,
-    beacons: BeaconTable,
-    info: FloatInfo,
-    model: ModelConfig,
-    truth: pd.DataFrame | None = None,
-    modes: pd.DataFrame | None = None,
+    outdir: Path, estimate: Estimate, beacons: BeaconTable, info: FloatInfo, model: ModelConfig, **extra: Any
 ) -> list[Path]:
-    """Write track.png, arrivals.png and uncertainty.png into `outdir`; return their paths."""
+    """Write track.png, arrivals.png and uncertainty.png of `estimate` into `outdir`; return
+    their paths. `extra` may give `truth` (a time, lat, lon frame, drawn on the map)."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     return [
-        plot_track(track, beacons, info, outdir / "track.png", truth=truth, modes=modes),
-        plot_arrivals(labels, track, beacons, info, model, outdir / "arrivals.png"),
-        plot_uncertainty(track, outdir / "uncertainty.png"),
+        plot_track(estimate.track, beacons, info, outdir / "track.png", truth=extra.get("truth"), modes=estimate.modes),
+        plot_arrivals(estimate.labels, estimate.track, beacons, info, model, outdir / "arrivals.png"),
+        plot_uncertainty(estimate.track, outdir / "uncertainty.png"),
     ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import matplotlib.dates as mdates
@@ -99,29 +100,16 @@ def _draw_modes(ax: Axes, track: pd.DataFrame, modes: pd.DataFrame | None, ref_l
     """Ring the ambiguous positions and mark the second modes; True if any were drawn."""
     if "ambiguous" not in track or not track["ambiguous"].any():
         return False
-    amb = track[track["ambiguous"]]
-    ax.scatter(
-        _unwrap_lon(amb["lon"].to_numpy(), ref_lon),
-        amb["lat"],
-        s=40,
-        facecolors="none",
-        edgecolors="tab:red",
-        linewidths=0.8,
-        zorder=4.5,
-        label="ambiguous (reported mode)",
-    )
+    marks: list[tuple[pd.DataFrame, dict[str, Any], str]] = [
+        (track[track["ambiguous"]], {"s": 40, "facecolors": "none", "edgecolors": "tab:red", "linewidths": 0.8},
+         "ambiguous (reported mode)")
+    ]  # fmt: skip
     if modes is not None and len(modes):
-        second = modes[modes["mode"] == 2]
-        ax.scatter(
-            _unwrap_lon(second["lon"].to_numpy(), ref_lon),
-            second["lat"],
-            s=22,
-            marker="x",
-            c="tab:red",
-            linewidths=0.9,
-            zorder=4.5,
-            label="second mode",
+        marks.append(
+            (modes[modes["mode"] == 2], {"s": 22, "marker": "x", "c": "tab:red", "linewidths": 0.9}, "second mode")
         )
+    for frame, style, label in marks:
+        ax.scatter(_unwrap_lon(frame["lon"].to_numpy(), ref_lon), frame["lat"], zorder=4.5, label=label, **style)
     return True
 
 
@@ -145,28 +133,13 @@ def _draw_beacons(ax: Axes, beacons: BeaconTable, keep: NDArray[np.bool_], ref_l
 
 
 def _draw_fixes(ax: Axes, info: FloatInfo, ref_lon: float) -> None:
-    """Launch fix (green) and, when known, end fix (red)."""
-    ax.plot(
-        _unwrap_lon(info.launch_lon, ref_lon),
-        info.launch_lat,
-        "o",
-        ms=10,
-        mfc="tab:green",
-        mec="k",
-        zorder=7,
-        label=f"launch {np.datetime_as_string(info.launch_time, 'D')}",
-    )
+    """Launch fix (green circle) and, when known, end fix (red square)."""
+    fixes = [(info.launch_lat, info.launch_lon, info.launch_time, "o", 10, "tab:green", "launch")]
     if info.has_end_fix:
-        ax.plot(
-            _unwrap_lon(info.end_lon, ref_lon),
-            info.end_lat,
-            "s",
-            ms=9,
-            mfc="tab:red",
-            mec="k",
-            zorder=7,
-            label=f"end fix {np.datetime_as_string(info.end_time, 'D')}",
-        )
+        fixes.append((info.end_lat, info.end_lon, info.end_time, "s", 9, "tab:red", "end fix"))
+    for lat, lon, when, marker, size, color, name in fixes:
+        label = f"{name} {np.datetime_as_string(when, 'D')}"
+        ax.plot(_unwrap_lon(lon, ref_lon), lat, marker, ms=size, mfc=color, mec="k", zorder=7, label=label)
 
 
 def _time_norm(tnum: NDArray) -> Normalize:

@@ -3,7 +3,7 @@ sum, across clutter levels, and what each costs per call.
 
 Windows are simulated in the paper setting along Fig. 4's straight line (the package's
 generative model); for each window a particle cloud is drawn around the true position
-(sd `cloud_km` per axis: a filter cloud a few times wider than its ~10 km posterior, so
+(sd `CLOUD_KM` per axis: a filter cloud a few times wider than its ~10 km posterior, so
 that particles off the mode are included). The window's factors come from
 `rafostrack.model.association_factors`; both engines (`rafostrack.engines.exact` and
 `.bp`, default tolerance) run on the same factors. Reported per clutter level: the
@@ -12,7 +12,7 @@ the error in the particle filter's normalised weights (total variation distance 
 window), the association-marginal error max |p_bp - p_exact| per window, BP sweeps, and the
 median wall time per call (all particles) of each engine.
 
-    python -m rafostrack.experiments.ranked.bp_vs_exact OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked --only bp_vs_exact [--quick] [--out DIR]
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ from ...engines import bp, exact
 from ...motion import RandomWalk
 from ...plots import save_png
 from ...resampling import normalise_log_weights
-from ..common import DEFAULT_WORKERS, cli, figure, pmap, resolve_sizes, save_csv, save_summary
-from .setting import CLUTTER_LEVELS, data_rng, make_scenario
+from ..common import DEFAULT_WORKERS, experiment, figure, pmap, save_csv
+from .setting import CLUTTER_LEVELS, line_record
 
 NAME = "bp_vs_exact"
 
@@ -40,21 +40,20 @@ NAME = "bp_vs_exact"
 class Sizes:
     particles: int
     windows: int  # windows per clutter level (the line's first `windows` days)
-    cloud_km: float = 30.0
     lambdas: tuple[float, ...] = CLUTTER_LEVELS
 
 
 FULL = Sizes(particles=1000, windows=60)
 QUICK = Sizes(particles=300, windows=15)
+SEED = 7  # the default seed of the published run
+CLOUD_KM = 30.0  # sd per axis of the particle cloud about the true position
 
 
-def _level(task: tuple[float, int, int, int, float]) -> list[dict[str, Any]]:
+def _level(task: tuple[float, int, int, int]) -> list[dict[str, Any]]:
     """Every window of one clutter level: both engines on the same factors."""
-    lam, seed, particles, windows, cloud_km = task
-    scenario = make_scenario("line", windows)
-    config = scenario.config(lam, particles=particles, seed=seed)
+    lam, seed, particles, windows = task
+    scenario, config, record = line_record(windows, lam, particles, seed, seed, lam)
     model = config.model
-    record = scenario.simulate(config, data_rng(seed, lam))
     rng = np.random.default_rng([seed, int(lam * 1000), 1])
     info, beacons = scenario.info, scenario.beacons
     rows = []
@@ -62,7 +61,7 @@ def _level(task: tuple[float, int, int, int, float]) -> list[dict[str, Any]]:
         if window.n_signals == 0:
             continue
         lat0, lon0 = scenario.truth["lat"].iloc[k + 1], scenario.truth["lon"].iloc[k + 1]
-        cloud = RandomWalk(cloud_km).initial(lat0, lon0, cloud_km, particles, rng)
+        cloud = RandomWalk(CLOUD_KM).initial(lat0, lon0, CLOUD_KM, particles, rng)
         lat, lon = cloud.lat, cloud.lon
         wb = m.window_beacons(beacons, info, window.time)
         ranges = m.beacon_ranges_m(lat, lon, wb)
@@ -112,14 +111,10 @@ def _level(task: tuple[float, int, int, int, float]) -> list[dict[str, Any]]:
     return rows
 
 
-def run(
-    outdir: Path, *, quick: bool = False, seed: int = 7, workers: int = DEFAULT_WORKERS, sizes: dict | None = None
-) -> dict[str, Any]:
+@experiment(FULL, QUICK)
+def run(outdir: Path, sz: Sizes, *, seed: int = SEED, workers: int = DEFAULT_WORKERS) -> dict[str, Any]:
     """Write bp_vs_exact.png, its CSVs and summary into `outdir`."""
-    started = time.perf_counter()
-    outdir = Path(outdir)
-    sz = resolve_sizes(QUICK if quick else FULL, sizes)
-    tasks = [(float(lam), seed, sz.particles, sz.windows, sz.cloud_km) for lam in sz.lambdas]
+    tasks = [(float(lam), seed, sz.particles, sz.windows) for lam in sz.lambdas]
     raw = pd.DataFrame([row for rows in pmap(_level, tasks, workers) for row in rows])
     agg = (
         raw.groupby("lambda")
@@ -149,15 +144,13 @@ def run(
         "name": NAME,
         "title": "BP vs exact association",
         "files": files,
-        "quick": quick,
         "seed": seed,
         "particles": sz.particles,
         "windows": sz.windows,
-        "cloud_km": sz.cloud_km,
+        "cloud_km": CLOUD_KM,
         "table": agg.to_dict(orient="records"),
-        "seconds": round(time.perf_counter() - started, 1),
     }
-    return save_summary(summary, outdir)
+    return summary
 
 
 def _draw(path: Path, raw: pd.DataFrame, agg: pd.DataFrame, sz: Sizes) -> None:
@@ -210,13 +203,7 @@ def _draw(path: Path, raw: pd.DataFrame, agg: pd.DataFrame, sz: Sizes) -> None:
             ax.grid(True, which="both", lw=0.4, alpha=0.5)
         fig.suptitle(
             f"BP vs exact on paper-setting windows (10 beacons, first 4 signals; {sz.windows} windows per λ, "
-            f"{sz.particles} particles within {sz.cloud_km:g} km of the truth)",
+            f"{sz.particles} particles within {CLOUD_KM:g} km of the truth)",
             fontsize=11,
         )
         save_png(fig, path)
-
-
-if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments.ranked import bp_vs_exact as _module
-
-    cli(_module.run, _module.__doc__)

@@ -10,12 +10,11 @@ repeats, its standard error (sd / sqrt(R)), the median, and the fraction of wind
 the error exceeds 0.1 units (the target lost); and the paired difference unranked - exact
 with its standard error.
 
-    python -m rafostrack.experiments.ranked.fig6b_clutter OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked --only fig6b_clutter [--quick] [--out DIR]
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,8 +23,8 @@ import numpy as np
 import pandas as pd
 
 from ...plots import save_png
-from ..common import DEFAULT_WORKERS, cli, figure, mean_se, pmap, resolve_sizes, save_csv, save_summary
-from .setting import CLUTTER_LEVELS, LOST_UNITS, data_rng, make_scenario, run_method
+from ..common import DEFAULT_WORKERS, experiment, figure, mean_se, pmap, save_csv
+from .setting import CLUTTER_LEVELS, LOST_UNITS, line_record, make_scenario, run_method
 
 NAME = "fig6b_clutter"
 # (method, smoothed too?): BP is filtered only, as in the paper.
@@ -48,14 +47,13 @@ class Sizes:
 
 FULL = Sizes(repeats=24, particles=1000)
 QUICK = Sizes(repeats=3, particles=300)
+SEED = 100  # the default seed of the published run
 
 
 def _repeat(task: tuple[float, int, int, int, int]) -> list[dict[str, Any]]:
     """Every method on one simulated record (lambda, repeat)."""
     lam, rep, seed, days, particles = task
-    scenario = make_scenario("line", days)
-    config = scenario.config(lam, particles=particles, seed=seed + rep)
-    record = scenario.simulate(config, data_rng(seed, lam, rep))
+    scenario, config, record = line_record(days, lam, particles, seed + rep, seed, lam, rep)
     rows = []
     for method, smooth in METHODS:
         r = run_method(scenario, record, config, method, smooth=smooth)
@@ -121,18 +119,9 @@ def paired(raw: pd.DataFrame, a: str, b: str, est: str) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def run(
-    outdir: Path,
-    *,
-    quick: bool = False,
-    seed: int = 100,
-    workers: int = DEFAULT_WORKERS,
-    sizes: dict | None = None,
-) -> dict[str, Any]:
+@experiment(FULL, QUICK)
+def run(outdir: Path, sz: Sizes, *, seed: int = SEED, workers: int = DEFAULT_WORKERS) -> dict[str, Any]:
     """Write fig6b_clutter.png, its CSVs and summary into `outdir`."""
-    started = time.perf_counter()
-    outdir = Path(outdir)
-    sz = resolve_sizes(QUICK if quick else FULL, sizes)
     tasks = [(float(lam), rep, seed, sz.days, sz.particles) for lam in sz.lambdas for rep in range(sz.repeats)]
     raw = pd.DataFrame([row for rows in pmap(_repeat, tasks, workers) for row in rows])
     agg = aggregate(raw)
@@ -175,7 +164,6 @@ def run(
         "name": NAME,
         "title": "Fig. 6b, MSE against clutter",
         "files": files,
-        "quick": quick,
         "seed": seed,
         "repeats": sz.repeats,
         "particles": sz.particles,
@@ -186,9 +174,8 @@ def run(
         "mapping": scenario.setting.describe(),
         "lost_units": LOST_UNITS,
         "table": table,
-        "seconds": round(time.perf_counter() - started, 1),
     }
-    return save_summary(summary, outdir)
+    return summary
 
 
 def _draw(path: Path, agg: pd.DataFrame, sz: Sizes, step_km: float) -> None:
@@ -229,9 +216,3 @@ def _draw(path: Path, agg: pd.DataFrame, sz: Sizes, step_km: float) -> None:
             fontsize=11,
         )
         save_png(fig, path)
-
-
-if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments.ranked import fig6b_clutter as _module
-
-    cli(_module.run, _module.__doc__)

@@ -7,12 +7,11 @@ times, true labels standing in for the hand labels), read with `rafostrack.pipel
 tracked with its `rafostrack.toml` model settings (the ones the arrivals were simulated
 with). Both methods use the launch and recovery fixes, as `rafostrack track` does.
 
-    python -m rafostrack.experiments.ranked.fig7_8_floats OUTDIR [--quick] [--seed N]
+    python -m rafostrack.experiments.ranked --only fig7_8_floats [--quick] [--out DIR]
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,7 +25,7 @@ from ...evaluate import association_accuracy, position_errors_km
 from ...pipeline import TrackInputs, load_float
 from ...plots import date_axis, save_png
 from ...tracker import TrackOutput, track_record
-from ..common import DEFAULT_WORKERS, cli, figure, pmap, resolve_sizes, save_csv, save_summary
+from ..common import DEFAULT_WORKERS, experiment, figure, pmap, save_csv
 from .setting import ONE_DAY, SAMPLES
 
 NAME = "fig7_8_floats"
@@ -43,6 +42,7 @@ class Sizes:
 
 FULL = Sizes(particles=1000)
 QUICK = Sizes(particles=300)
+SEED = 0  # the default seed of the published run
 
 
 def read_truth(float_id: str, samples: Path = SAMPLES) -> pd.DataFrame:
@@ -72,13 +72,9 @@ def track_sample(task: tuple[str, str, int, int, int | None]) -> TrackOutput:
     return track_record(loaded.beacons, loaded.info, config, record, also_filtered=True)
 
 
-def run(
-    outdir: Path, *, quick: bool = False, seed: int = 0, workers: int = DEFAULT_WORKERS, sizes: dict | None = None
-) -> dict[str, Any]:
+@experiment(FULL, QUICK)
+def run(outdir: Path, sz: Sizes, *, seed: int = SEED, workers: int = DEFAULT_WORKERS) -> dict[str, Any]:
     """Write fig7_float767.png, fig8_float811.png, their CSVs and the summary into `outdir`."""
-    started = time.perf_counter()
-    outdir = Path(outdir)
-    sz = resolve_sizes(QUICK if quick else FULL, sizes)
     tasks = [(fid, method, sz.particles, seed, sz.days) for fid, _ in FLOATS for method in METHODS]
     outputs = dict(zip([(t[0], t[1]) for t in tasks], pmap(track_sample, tasks, workers), strict=True))
     files: list[str] = []
@@ -139,14 +135,12 @@ def run(
         "name": NAME,
         "title": "Figs. 7-8, sample floats 767 and 811",
         "files": files,
-        "quick": quick,
         "seed": seed,
         "particles": sz.particles,
         "days": sz.days,
         "floats": floats,
-        "seconds": round(time.perf_counter() - started, 1),
     }
-    return save_summary(summary, outdir)
+    return summary
 
 
 def _rms(e: np.ndarray) -> float:
@@ -208,9 +202,3 @@ def _draw(path: Path, fid: str, fig_name: str, table: pd.DataFrame, particles: i
             fontsize=11,
         )
         save_png(fig, path)
-
-
-if __name__ == "__main__":  # run the importable module, so that worker processes can find its tasks
-    from rafostrack.experiments.ranked import fig7_8_floats as _module
-
-    cli(_module.run, _module.__doc__)

@@ -234,6 +234,16 @@ def make_scenario(shape: str, days: int, setting: PaperSetting | None = None) ->
     return Scenario(shape, setting, xy, setting.beacons(), info, truth)
 
 
+def line_record(
+    days: int, clutter_rate: float, particles: int, seed: int, data_seed: int, *data_keys: float
+) -> tuple[Scenario, Config, ArrivalRecord]:
+    """The line target of `days` days, the tracker's configuration (`particles`, `seed`) and
+    a record simulated at `clutter_rate` with the generator `data_rng(data_seed, *data_keys)`."""
+    scenario = make_scenario("line", days)
+    config = scenario.config(clutter_rate, particles=particles, seed=seed)
+    return scenario, config, scenario.simulate(config, data_rng(data_seed, *data_keys))
+
+
 def data_rng(seed: int, *keys: float) -> np.random.Generator:
     """The simulation generator of one (seed, case...) run, independent of run order."""
     return np.random.default_rng([int(seed), *(round(k * 1000) for k in keys)])

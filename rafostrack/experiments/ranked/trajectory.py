@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -12,7 +11,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from ...plots import save_png
-from ..common import figure, pmap, resolve_sizes, save_csv, save_summary
+from ..common import experiment, figure, pmap, save_csv
 from .setting import LOST_UNITS, ONE_DAY, T0, Scenario, data_rng, make_scenario, method_task, true_signal_counts
 
 
@@ -23,27 +22,40 @@ class TrajectorySizes:
     clutter_rate: float = 4.0  # the paper's Poisson(4), Pc = 0.8
 
 
+@dataclass(frozen=True)
+class TrajectoryFigure:
+    """One of the paper's single-target figures: a name, a trajectory shape, a title and
+    the sizes of the full and the quick run."""
+
+    name: str
+    shape: str  # "line" or "spiral" (`setting.make_scenario`)
+    title: str
+    full: TrajectorySizes
+    quick: TrajectorySizes
+
+    def run(self, outdir: Path, **options: Any) -> dict[str, Any]:
+        """Write `<name>.png` and its CSVs into `outdir`; return the summary (also as JSON)."""
+        return experiment(self.full, self.quick)(self._run)(outdir, **options)
+
+    def _run(self, outdir: Path, sz: TrajectorySizes, *, seed: int = 0, workers: int = 2) -> dict[str, Any]:
+        return run_trajectory(self.name, self.shape, self.title, outdir, sz, seed=seed, workers=workers)
+
+
 def run_trajectory(
     name: str,
     shape: str,
     title: str,
     outdir: Path,
+    sz: TrajectorySizes,
     *,
-    full: TrajectorySizes,
-    quick_sizes: TrajectorySizes,
-    quick: bool,
     seed: int,
     workers: int,
-    sizes: dict[str, Any] | None,
 ) -> dict[str, Any]:
     """Simulate one target on `shape` at clutter Poisson(4), track it with the ranked model
     (exact engine; filtered = the paper's estimate, smoothed = ours), the unranked baseline
     and the labelled filter, and draw the track and the labelled arrival times."""
     from ...evaluate import association_accuracy
 
-    started = time.perf_counter()
-    outdir = Path(outdir)
-    sz = resolve_sizes(quick_sizes if quick else full, sizes)
     scenario = make_scenario(shape, sz.days)
     config = scenario.config(sz.clutter_rate, particles=sz.particles, seed=seed)
     record = scenario.simulate(config, data_rng(seed, sz.clutter_rate))
@@ -115,7 +127,6 @@ def run_trajectory(
         "name": name,
         "title": title,
         "files": files,
-        "quick": quick,
         "seed": seed,
         "days": scenario.days,
         "particles": sz.particles,
@@ -155,9 +166,8 @@ def run_trajectory(
         "max_err_km_smoothed": float(np.sqrt(ours.sq_err_smoothed.max()) * setting.unit_km),
         "label_accuracy": {"filtered": acc_f, "smoothed": acc_s},
         "label_errors_smoothed": label_errors,
-        "seconds": round(time.perf_counter() - started, 1),
     }
-    return save_summary(summary, outdir)
+    return summary
 
 
 def _draw_trajectory(
@@ -178,25 +188,12 @@ def _draw_trajectory(
             ax_map.annotate(b, bxy[k], xytext=(4, 4), textcoords="offset points", fontsize=8)
         ax_map.plot(scenario.xy[:, 0], scenario.xy[:, 1], "-", color="k", lw=2.2, label="truth", zorder=2)
         ax_map.plot(*scenario.xy[0], "o", color="k", ms=6, zorder=6)
-        ax_map.plot(
-            table["x_unranked"], table["y_unranked"], ":", color="0.5", lw=1.2, label="unranked baseline (filtered)"
-        )
-        ax_map.plot(
-            table["x_filtered"],
-            table["y_filtered"],
-            "-",
-            color="tab:orange",
-            lw=1.2,
-            label="ranked, exact, filtered (paper)",
-        )
-        ax_map.plot(
-            table["x_smoothed"],
-            table["y_smoothed"],
-            "-",
-            color="tab:blue",
-            lw=1.5,
-            label="ranked, exact, smoothed (ours)",
-        )
+        for key, style, color, width, label in (
+            ("unranked", ":", "0.5", 1.2, "unranked baseline (filtered)"),
+            ("filtered", "-", "tab:orange", 1.2, "ranked, exact, filtered (paper)"),
+            ("smoothed", "-", "tab:blue", 1.5, "ranked, exact, smoothed (ours)"),
+        ):
+            ax_map.plot(table[f"x_{key}"], table[f"y_{key}"], style, color=color, lw=width, label=label)
         est = table[["x_filtered", "y_filtered", "x_smoothed", "y_smoothed", "x_unranked", "y_unranked"]].to_numpy()
         lo = max(min(-0.05, float(np.nanmin(est)) - 0.02), -0.5)
         hi = min(max(1.05, float(np.nanmax(est)) + 0.02), 1.5)
@@ -242,3 +239,11 @@ def _draw_trajectory(
             fontsize=10,
         )
         save_png(fig, path)
+
+
+LINE = TrajectoryFigure(
+    "fig4_line", "line", "Fig. 4, straight line", TrajectorySizes(60, 1000), TrajectorySizes(60, 400)
+)
+SPIRAL = TrajectoryFigure(
+    "fig5_spiral", "spiral", "Fig. 5, spiral", TrajectorySizes(120, 1000), TrajectorySizes(120, 400)
+)
