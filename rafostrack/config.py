@@ -92,6 +92,18 @@ class MotionConfig:
 
 
 @dataclass(frozen=True)
+class RecoveryConfig:
+    """Robust drift and lost-track recovery (`rafostrack.recovery`)."""
+
+    enabled: bool = setting()
+    jump_rate_per_day: float = setting(">= 0", _non_negative)
+    jump_sd_km: float = setting("> 0", _positive)
+    search_radius_km: float = setting("> 0", _positive)
+    reseed_fraction: float = setting("in (0, 0.9]", lambda v: 0 < v <= 0.9)
+    check_every: int = setting(">= 1", lambda v: v >= 1)
+
+
+@dataclass(frozen=True)
 class FixesConfig:
     """Launch and end position fixes as observations."""
 
@@ -138,6 +150,7 @@ class BPConfig:
 class Config:
     model: ModelConfig
     motion: MotionConfig
+    recovery: RecoveryConfig
     fixes: FixesConfig
     filter: FilterConfig
     smoother: SmootherConfig

@@ -133,6 +133,23 @@ class Particles:
         vel = None if self.velocity_km_per_day is None else self.velocity_km_per_day[index]
         return Particles(self.lat[index], self.lon[index], vel)
 
+    def replace_at(self, index: NDArray[np.intp], other: Particles) -> Particles:
+        """A copy with the particles at `index` replaced by `other` (same length as `index`)."""
+        lat, lon = self.lat.copy(), self.lon.copy()
+        lat[index], lon[index] = other.lat, other.lon
+        vel = None
+        if self.velocity_km_per_day is not None and other.velocity_km_per_day is not None:
+            vel = self.velocity_km_per_day.copy()
+            vel[index] = other.velocity_km_per_day
+        return Particles(lat, lon, vel)
+
+    @staticmethod
+    def concat(parts: list[Particles]) -> Particles:
+        vel = None
+        if all(p.velocity_km_per_day is not None for p in parts):
+            vel = np.concatenate([p.velocity_km_per_day for p in parts])  # type: ignore[misc]
+        return Particles(np.concatenate([p.lat for p in parts]), np.concatenate([p.lon for p in parts]), vel)
+
 
 @dataclass(frozen=True)
 class Cloud:

@@ -17,13 +17,15 @@ from __future__ import annotations
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .domain import Cloud, PositionFix, Window, days_between
+from .domain import Cloud, Particles, PositionFix, Window, days_between
 from .likelihoods import ArrivalLikelihood, Evidence, Likelihood
 from .motion import MotionModel
+from .recovery import RecoveryMonitor, RecoverySettings
 from .resampling import Resampler, ess, normalise_log_weights
 
 Observation = Window | PositionFix
@@ -53,6 +55,7 @@ class Step:
     observation: Observation
     beacon_index: NDArray[np.intp]  # beacon-table rows of the label_probs rows
     label_probs: NDArray[np.float64] | None  # (s, K) filtered P(signal j from beacon i), if kept
+    proposed_mass: float = 0.0  # posterior mass of particles drawn from data-driven proposals
 
     @property
     def window(self) -> Window | None:
@@ -67,6 +70,8 @@ class FilterResult:
     n_steps: int
     n_resamples: int
     warnings: list[str]
+    n_checks: int = 0  # windows the recovery monitor searched
+    n_reseeds: int = 0  # windows where it re-seeded part of the cloud
 
 
 @dataclass(frozen=True)
@@ -76,8 +81,22 @@ class FilterSettings:
     resampler: Resampler
 
 
+class Proposal(Protocol):
+    """A data-driven proposal for new particle states (e.g. `recovery.Reseeding`)."""
+
+    def sample(self, n: int, rng: np.random.Generator) -> Particles: ...
+
+    def log_density(self, particles: Particles) -> NDArray[np.float64]: ...
+
+
+# Per observation, the data-driven proposals to mix with the motion model: (fraction, proposal).
+Guide = Callable[[Observation], list[tuple[float, Proposal]]]
+
+
 class ParticleFilter:
-    """Bootstrap particle filter for one float (see module docstring)."""
+    """Particle filter for one float (see module docstring), with optional data-driven
+    proposals: a recovery monitor that re-seeds a lost cloud, and a guide (proposals given
+    per observation, e.g. from a first pass)."""
 
     def __init__(
         self,
@@ -87,6 +106,8 @@ class ParticleFilter:
         settings: FilterSettings,
         *,
         label_probs: bool = True,
+        recovery: RecoverySettings | None = None,
+        guide: Guide | None = None,
     ):
         """`label_probs=False` skips the filtered association marginals (when only smoothed
         labels are wanted, which are recomputed after smoothing)."""
@@ -95,6 +116,8 @@ class ParticleFilter:
         self.fixes = fixes
         self.settings = settings
         self.label_probs = label_probs
+        self.recovery = recovery
+        self.guide = guide
 
     def run(
         self,
@@ -114,42 +137,103 @@ class ParticleFilter:
         kept: list[Step] = []
         warnings: list[str] = []
         n_resamples = 0
+        monitor = None
+        if self.recovery is not None:
+            monitor = RecoveryMonitor(self.recovery, self.arrivals, self.motion)
         for obs in events:
-            particles = self.motion.propagate(particles, days_between(t_prev, obs.time), rng)
+            dt_days = days_between(t_prev, obs.time)
+            prior_weights, log_prior = normalise_log_weights(log_w)
+            moved = self.motion.propagate(particles, dt_days, rng)
+            evidence = self._evaluate(moved, obs)
+            proposals = [] if self.guide is None else list(self.guide(obs))
+            if monitor is not None and isinstance(obs, Window):
+                reseed = monitor.proposal(obs, dt_days, moved, prior_weights, evidence.loglik)
+                if reseed is not None:
+                    proposals.append((monitor.settings.fraction, reseed))
+            source = np.zeros(n, dtype=np.intp)
+            correction = np.zeros(n)
+            if proposals:
+                moved, evidence, source, correction = self._mix(
+                    particles, moved, evidence, obs, dt_days, proposals, rng
+                )
             t_prev = obs.time
-            evidence = self._evaluate(particles, obs)
             warnings.extend(evidence.warnings)
             loglik, skipped = _finite_loglik(evidence.loglik, obs, self.arrivals.info.float_id, warnings)
-            _, log_prior = normalise_log_weights(log_w)
-            log_w = log_w + loglik
+            log_w = log_w + loglik + correction
             weights, log_post = normalise_log_weights(log_w)
+            if monitor is not None and isinstance(obs, Window):
+                monitor.record(log_post - log_prior)
             eff = ess(weights)
             probs = None
             if self.label_probs:
                 p_match = evidence.p_match if evidence.p_match is not None else np.zeros((n, 0, 0))
                 probs = np.einsum("p,psk->sk", weights, p_match)
             step = Step(
-                cloud=Cloud(obs.time, particles, weights),
+                cloud=Cloud(obs.time, moved, weights),
                 loglik=np.nan if skipped else log_post - log_prior,
                 ess=eff,
                 observation=obs,
                 beacon_index=evidence.beacon_index,
                 label_probs=probs,
+                proposed_mass=float(weights[source > 0].sum()),
             )
             if on_step is not None:
                 on_step(step)
             if keep:
                 kept.append(step)
+            particles = moved
             if eff < self.settings.resample_ess_fraction * n:
                 particles = particles.take(self.settings.resampler(weights, rng))
                 log_w = np.zeros(n)
                 n_resamples += 1
-        return FilterResult(kept, len(events), n_resamples, warnings)
+        checks = (monitor.n_checks, monitor.n_reseeds) if monitor is not None else (0, 0)
+        return FilterResult(kept, len(events), n_resamples, warnings, *checks)
 
-    def _evaluate(self, particles, obs: Observation) -> Evidence:
+    def _evaluate(self, particles: Particles, obs: Observation) -> Evidence:
         if isinstance(obs, Window):
             return self.arrivals.evaluate(particles, obs, marginals=self.label_probs)
         return self.fixes.evaluate(particles, obs)
+
+    def _mix(
+        self,
+        before: Particles,
+        moved: Particles,
+        evidence: Evidence,
+        obs: Observation,
+        dt_days: float,
+        proposals: list[tuple[float, Proposal]],
+        rng: np.random.Generator,
+    ) -> tuple[Particles, Evidence, NDArray[np.intp], NDArray[np.float64]]:
+        """Draw each particle's new state from the motion model (already in `moved`) or, with
+        probability alpha_k, from proposal k; return the states, their evidence, which
+        proposal each came from (0 = motion) and the log weight correction
+        log f(x' | x) - log [alpha_0 f(x' | x) + sum_k alpha_k q_k(x')]
+        (multiple importance sampling, balance heuristic: every draw is weighted by the
+        mixture it may have come from)."""
+        n = len(moved)
+        alphas = np.array([1.0 - sum(a for a, _ in proposals)] + [a for a, _ in proposals])
+        source = rng.choice(len(alphas), size=n, p=alphas)
+        for k, (_, proposal) in enumerate(proposals, start=1):
+            slots = np.flatnonzero(source == k)
+            if len(slots):
+                moved = moved.replace_at(slots, proposal.sample(len(slots), rng))
+        redrawn = np.flatnonzero(source > 0)
+        if len(redrawn):
+            evidence = _merge_evidence(evidence, redrawn, self._evaluate(moved.take(redrawn), obs))
+        log_f = self.motion.log_transition(before, moved, dt_days)
+        terms = [np.log(alphas[0]) + log_f] + [np.log(a) + q.log_density(moved) for a, q in proposals]
+        return moved, evidence, source, log_f - np.logaddexp.reduce(np.array(terms), axis=0)
+
+
+def _merge_evidence(base: Evidence, index: NDArray[np.intp], other: Evidence) -> Evidence:
+    """`base` with the particles at `index` replaced by `other`'s (same observation)."""
+    loglik = base.loglik.copy()
+    loglik[index] = other.loglik
+    p_match = None
+    if base.p_match is not None and other.p_match is not None:
+        p_match = base.p_match.copy()
+        p_match[index] = other.p_match
+    return Evidence(loglik, base.beacon_index, p_match, base.warnings + other.warnings)
 
 
 def _finite_loglik(loglik: NDArray, obs: Observation, float_id: str, warnings: list[str]) -> tuple[NDArray, bool]:

@@ -67,8 +67,12 @@ def displace(
     return lat, wrap_lon(lon)
 
 
-def local_offsets_km(lat_deg: ArrayLike, lon_deg: ArrayLike, lat0: float, lon0: float) -> tuple[NDArray, NDArray]:
-    """East/north offsets (km) of points from (lat0, lon0) in its tangent plane."""
+def local_offsets_km(
+    lat_deg: ArrayLike, lon_deg: ArrayLike, lat0: ArrayLike, lon0: ArrayLike
+) -> tuple[NDArray, NDArray]:
+    """East/north offsets (km) of points from (lat0, lon0) in its tangent plane (the origin
+    may be one point, or one per point)."""
+    lat0, lon0 = np.asarray(lat0, dtype=float), np.asarray(lon0, dtype=float)
     m, n = radii_of_curvature_m(lat0)
     east = np.radians(wrap_lon(np.asarray(lon_deg) - lon0)) * n * np.cos(np.radians(lat0)) / 1e3
     north = np.radians(np.asarray(lat_deg) - lat0) * m / 1e3

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import logsumexp
 
 from .domain import Cloud, days_between
 from .geodesy import local_offsets_km
@@ -37,6 +38,9 @@ _PRUNE = 1e-14
 _MIN_SD_KM = 1e-3
 # Largest |z|^2 / 2 for which the kernel exponents are built in float32.
 _FLOAT32_REACH = 1e3
+# A broad mixture kernel is left out of a row where it adds less than this fraction.
+_MIXTURE_TOL = 1e-4
+_LOG_2PI = float(np.log(2.0 * np.pi))
 
 
 def _plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon: float) -> NDArray[np.float64]:
@@ -48,32 +52,77 @@ def _plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon
     return np.column_stack(columns)
 
 
-def backward_step(
-    now: Cloud, nxt: Cloud, smoothed_next: NDArray[np.float64], transition: LinearGaussian
-) -> NDArray[np.float64]:
-    """Smoothed weights at `now` from the smoothed weights at the next step (module docstring).
+def _log_kernel(za: NDArray, zb: NDArray, dtype: type) -> NDArray:
+    """(J, I) of zb_j . za_i - |za_i|^2 / 2 in `dtype`, without BLAS."""
+    out = np.einsum("jk,ki->ji", zb.astype(dtype), np.ascontiguousarray(za.T, dtype=dtype))
+    out -= (0.5 * (za * za).sum(axis=1)).astype(dtype)[None, :]
+    return out
 
-    The (J, I) matrix is built in float32 (3x faster; weights agree with float64 to ~1e-6)
-    unless the exponents are large enough for float32 rounding to matter, e.g. a
-    zero-time step's 1 m kernel. Products and sums avoid BLAS, whose threaded reductions
-    would make the result depend on the machine's thread count.
+
+def _whitened(kernel: LinearGaussian, xa: NDArray, xb: NDArray) -> tuple[NDArray, NDArray, NDArray, float]:
+    """z_a = W A x_a, z_b = W (x_b - b), W and log|det W| of a kernel (floored, `_MIN_SD_KM`)."""
+    white = kernel.whitening(_MIN_SD_KM)
+    za = np.einsum("kl,lm,im->ik", white, kernel.A, xa)
+    zb = np.einsum("kl,jl->jk", white, xb - kernel.b)
+    return za, zb, white, float(np.linalg.slogdet(white)[1])
+
+
+def backward_step(
+    now: Cloud,
+    nxt: Cloud,
+    smoothed_next: NDArray[np.float64],
+    components: list[tuple[float, LinearGaussian]],
+) -> NDArray[np.float64]:
+    """Smoothed weights at `now` from the smoothed weights at the next step (module docstring),
+    for a transition that is a mixture of linear-Gaussian kernels, the first the drift model
+    and any others broad (e.g. `motion.JumpMixture`'s jump).
+
+    The first kernel's (J, I) matrix is built in float32 (3x faster; weights agree with
+    float64 to ~1e-6) unless the exponents are large enough for float32 rounding to
+    matter, e.g. a zero-time step's 1 m kernel. A further kernel k enters row j only where
+    its peak density could add at least `_MIXTURE_TOL` to that row's predictive density
+    sum_i W_i f(x_j | x_i); elsewhere its share is below the float32 resolution of the
+    weights. Rows then combine in log space. Products and sums avoid BLAS, whose threaded
+    reductions would make the result depend on the machine's thread count.
     """
     keep_i = np.flatnonzero(now.weights > _PRUNE * now.weights.max())
     keep_j = np.flatnonzero(smoothed_next > _PRUNE * smoothed_next.max())
     ref = keep_j[np.argmax(smoothed_next[keep_j])]
     ref_lat, ref_lon = float(nxt.lat[ref]), float(nxt.lon[ref])
-    white = transition.whitening(_MIN_SD_KM)
-    za = np.einsum("kl,lm,im->ik", white, transition.A, _plane_states(now, keep_i, ref_lat, ref_lon))
-    zb = np.einsum("kl,jl->jk", white, _plane_states(nxt, keep_j, ref_lat, ref_lon) - transition.b)
+    xa = _plane_states(now, keep_i, ref_lat, ref_lon)
+    xb = _plane_states(nxt, keep_j, ref_lat, ref_lon)
+    log_w = np.log(now.weights[keep_i])
+    (w0, k0), *others = [(w, k) for w, k in components if w > 0]
+    za, zb, _, log_det = _whitened(k0, xa, xb)
     reach = 0.5 * max(float((za * za).sum(axis=1).max()), float((zb * zb).sum(axis=1).max()))
     dtype = np.float32 if reach < _FLOAT32_REACH else np.float64
-    log_e = np.einsum("jk,ki->ji", zb.astype(dtype), np.ascontiguousarray(za.T, dtype=dtype))
-    log_e += (np.log(now.weights[keep_i]) - 0.5 * (za * za).sum(axis=1)).astype(dtype)[None, :]
-    log_e -= log_e.max(axis=1, keepdims=True)
+    log_e = _log_kernel(za, zb, dtype)
+    log_e += log_w.astype(dtype)[None, :]
+    row_max = log_e.max(axis=1, keepdims=True)
+    log_e -= row_max
     e = np.exp(log_e, out=log_e)  # (J, I), each row's maximum is 1
+    # log sum_i W_i f0(x_j | x_i), with f0's row terms (its |z_j|^2 and normaliser).
+    row0 = np.log(w0) + log_det - 0.5 * k0.dim * _LOG_2PI - 0.5 * (zb * zb).sum(axis=1)
+    log_pred = row_max[:, 0].astype(np.float64) + np.log(e.sum(axis=1, dtype=np.float64)) + row0
+    extra = []  # (rows, (rows, I) kernel values in the common row scale) per broad kernel
+    for weight, kernel in others:
+        zak, zbk, _, log_det_k = _whitened(kernel, xa, xb)
+        log_peak = np.log(weight) + log_det_k - 0.5 * kernel.dim * _LOG_2PI
+        rows = np.flatnonzero(log_peak - log_pred > np.log(_MIXTURE_TOL))
+        if len(rows) == 0:
+            continue
+        rowk = log_peak - 0.5 * (zbk[rows] * zbk[rows]).sum(axis=1)
+        log_k = _log_kernel(zak, zbk[rows], np.float64) + log_w[None, :] + rowk[:, None]
+        extra.append((rows, log_k))
+    for rows, log_k in extra:
+        log_pred[rows] = np.logaddexp(log_pred[rows], logsumexp(log_k, axis=1))
+    # sum_j W_{t+1|T}^j W_i f_ji / pred_j, with W_i f0_ji = e_ji exp(row_max_j + row0_j).
+    scale = smoothed_next[keep_j] * np.exp(row_max[:, 0].astype(np.float64) + row0 - log_pred)
+    contrib = np.einsum("ji,j->i", e, scale.astype(e.dtype)).astype(np.float64)
+    for rows, log_k in extra:
+        contrib += np.einsum("ji,j->i", np.exp(log_k - log_pred[rows, None]), smoothed_next[keep_j][rows])
     out = np.zeros_like(now.weights)
-    ratio = (smoothed_next[keep_j] / e.sum(axis=1, dtype=np.float64)).astype(dtype)
-    out[keep_i] = np.einsum("ji,j->i", e, ratio)
+    out[keep_i] = contrib
     return out / out.sum()
 
 
@@ -84,6 +133,6 @@ def smooth(clouds: Sequence[Cloud], motion: MotionModel) -> list[NDArray[np.floa
     smoothed = [np.empty(0)] * len(clouds)
     smoothed[-1] = clouds[-1].weights / clouds[-1].weights.sum()
     for t in range(len(clouds) - 2, -1, -1):
-        transition = motion.transition(max(days_between(clouds[t].time, clouds[t + 1].time), 0.0))
-        smoothed[t] = backward_step(clouds[t], clouds[t + 1], smoothed[t + 1], transition)
+        components = motion.components(max(days_between(clouds[t].time, clouds[t + 1].time), 0.0))
+        smoothed[t] = backward_step(clouds[t], clouds[t + 1], smoothed[t + 1], components)
     return smoothed

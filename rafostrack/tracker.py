@@ -20,7 +20,8 @@ from .domain import ArrivalRecord, BeaconTable, FloatInfo, PositionFix
 from .estimates import Estimate, EstimateBuilder, build_estimate
 from .filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
 from .likelihoods import ArrivalLikelihood, PositionFixLikelihood, arrivals_from_config
-from .motion import MotionModel, motion_from_config
+from .motion import JumpMixture, MotionModel, motion_from_config
+from .recovery import RecoverySettings
 from .resampling import RESAMPLERS
 from .smoother import smooth
 
@@ -43,6 +44,24 @@ class TrackOutput:
         return self.estimate.labels
 
 
+def _motion(config: Config) -> MotionModel:
+    """The configured drift model, made robust by a jump component when recovery is on."""
+    base = motion_from_config(config.motion)
+    rec = config.recovery
+    if not rec.enabled or rec.jump_rate_per_day == 0:
+        return base
+    return JumpMixture(base, rec.jump_rate_per_day, rec.jump_sd_km)
+
+
+def _recovery(config: Config) -> RecoverySettings | None:
+    rec = config.recovery
+    if not rec.enabled or config.filter.likelihood == "labeled":  # known labels need no search
+        return None
+    return RecoverySettings(
+        search_radius_km=rec.search_radius_km, fraction=rec.reseed_fraction, check_every=rec.check_every
+    )
+
+
 @dataclass(frozen=True)
 class Tracker:
     """One float's tracker: its components and the few settings that join them."""
@@ -57,6 +76,7 @@ class Tracker:
     smooth: bool
     ambiguity: AmbiguityConfig
     seed: int
+    recovery: RecoverySettings | None = None
 
     @classmethod
     def from_config(cls, config: Config, beacons: BeaconTable, info: FloatInfo) -> Tracker:
@@ -64,7 +84,7 @@ class Tracker:
         return cls(
             info=info,
             beacon_ids=beacons.beacon_id,
-            motion=motion_from_config(config.motion),
+            motion=_motion(config),
             arrivals=arrivals_from_config(beacons, info, config),
             settings=FilterSettings(
                 config.filter.particles, config.filter.resample_ess_fraction, RESAMPLERS[config.filter.resampling]
@@ -74,6 +94,7 @@ class Tracker:
             smooth=config.smoother.enabled,
             ambiguity=config.ambiguity,
             seed=config.filter.seed,
+            recovery=_recovery(config),
         )
 
     def run_filter(
@@ -88,7 +109,9 @@ class Tracker:
         generator; see `ParticleFilter.run` for `keep` and `on_step`."""
         info = self.info
         fixes = PositionFixLikelihood(info.float_id)
-        pf = ParticleFilter(self.motion, self.arrivals, fixes, self.settings, label_probs=label_probs)
+        pf = ParticleFilter(
+            self.motion, self.arrivals, fixes, self.settings, label_probs=label_probs, recovery=self.recovery
+        )
         launch = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
         events = observations(record.windows, self.end_fix)
         return pf.run(launch, events, float_rng(self.seed, info.float_id), keep=keep, on_step=on_step)

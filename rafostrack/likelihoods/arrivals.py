@@ -14,6 +14,8 @@ The factors themselves (predicted arrivals, w_ij, u_i) are `rafostrack.model`'s.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -38,6 +40,12 @@ class ArrivalLikelihood(Likelihood):
         self.beacons = beacons
         self.info = info
         self.model = model
+
+    def with_toa_sigma(self, toa_sigma_s: float) -> ArrivalLikelihood:
+        """A copy with the TOA noise sd set to `toa_sigma_s` (e.g. widened for a coarse grid)."""
+        other = copy.copy(self)
+        other.model = dataclasses.replace(self.model, toa_sigma_s=toa_sigma_s)
+        return other
 
     def label_probs(
         self, particles: Particles, weights: NDArray, window: Window

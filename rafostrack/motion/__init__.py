@@ -7,7 +7,7 @@ itself from the `[motion]` section with `from_config`. To add one, see ARCHITECT
 from __future__ import annotations
 
 from ..config import MotionConfig
-from .base import LinearGaussian, MotionModel
+from .base import JumpMixture, LinearGaussian, MotionModel
 from .ou import IntegratedOU
 from .random_walk import RandomWalk
 
@@ -19,4 +19,12 @@ def motion_from_config(cfg: MotionConfig) -> MotionModel:
     return MOTION_MODELS[cfg.model].from_config(cfg)
 
 
-__all__ = ["MOTION_MODELS", "IntegratedOU", "LinearGaussian", "MotionModel", "RandomWalk", "motion_from_config"]
+__all__ = [
+    "MOTION_MODELS",
+    "IntegratedOU",
+    "JumpMixture",
+    "LinearGaussian",
+    "MotionModel",
+    "RandomWalk",
+    "motion_from_config",
+]

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from ..config import MotionConfig
 from ..domain import Particles
-from ..geodesy import displace
+from ..geodesy import displace, local_offsets_km
 
 # Positions are kept off the poles, where east/north displacements are undefined.
 _MAX_LAT = 89.999
@@ -46,6 +46,13 @@ class LinearGaussian:
     @property
     def Q(self) -> NDArray[np.float64]:
         return self.L @ self.L.T
+
+    def log_density(self, now: NDArray[np.float64], nxt: NDArray[np.float64], min_sd_km: float = 1e-3) -> NDArray:
+        """log N(nxt; A now + b, Q) for states (P, d), elementwise (Q floored as in `whitening`)."""
+        white = self.whitening(min_sd_km)
+        z = np.einsum("kl,pl->pk", white, nxt - np.einsum("kl,pl->pk", self.A, now) - self.b)
+        _, log_det = np.linalg.slogdet(white)
+        return -0.5 * np.einsum("pk,pk->p", z, z) + log_det - 0.5 * self.dim * np.log(2.0 * np.pi)
 
     def whitening(self, min_sd_km: float) -> NDArray[np.float64]:
         """W with W (x' - A x - b) ~ N(0, I), for Q floored at `min_sd_km`^2 per axis (a
@@ -76,6 +83,30 @@ class MotionModel(ABC):
     @abstractmethod
     def transition(self, dt_days: float) -> LinearGaussian:
         """A(dt), b(dt) and the noise factor L(dt) of the exact transition over `dt_days` (>= 0)."""
+
+    def components(self, dt_days: float) -> list[tuple[float, LinearGaussian]]:
+        """The transition as a mixture of linear-Gaussian kernels (probability, kernel); one
+        kernel for the plain models, more for a mixture such as `JumpMixture`."""
+        return [(1.0, self.transition(dt_days))]
+
+    def plane_states(self, now: Particles, nxt: Particles) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Tangent-plane states (P, d) of `now` (at the origin) and of `nxt` (its offset from
+        `now` in `now`'s tangent plane), particle by particle, with velocities if any."""
+        east, north = local_offsets_km(nxt.lat, nxt.lon, now.lat, now.lon)
+        zero = np.zeros(len(now))
+        a, b = [zero, zero], [east, north]
+        if self.has_velocity:
+            if now.velocity_km_per_day is None or nxt.velocity_km_per_day is None:
+                raise ValueError(f"motion model {self.name!r} needs particles with a velocity")
+            a += list(now.velocity_km_per_day.T)
+            b += list(nxt.velocity_km_per_day.T)
+        return np.column_stack(a), np.column_stack(b)
+
+    def log_transition(self, now: Particles, nxt: Particles, dt_days: float) -> NDArray[np.float64]:
+        """log f(nxt_p | now_p, dt) for each particle p (the mixture over `components`)."""
+        a, b = self.plane_states(now, nxt)
+        terms = [np.log(w) + k.log_density(a, b) for w, k in self.components(max(dt_days, 0.0)) if w > 0]
+        return np.logaddexp.reduce(np.array(terms), axis=0)
 
     def stationary_velocity(self) -> tuple[NDArray[np.float64], float]:
         """Mean (east, north) and per-axis sd (km/day) of the velocity a freshly launched
@@ -112,3 +143,90 @@ class MotionModel(ABC):
     def propagate(self, particles: Particles, dt_days: float, rng: np.random.Generator) -> Particles:
         """Sample x' ~ f(. | x, dt) for every particle (exact over any `dt_days`)."""
         return self.step(particles, dt_days, rng.standard_normal((self.dim, len(particles))))
+
+
+@dataclass(frozen=True)
+class JumpMixture(MotionModel):
+    """A drift model made robust: with probability eps(dt) = 1 - exp(-rate dt) the float
+    makes a move the base model cannot explain (carried by a current the model does not
+    know, or a lost track), modelled as a broad jump:
+
+        f(x' | x, dt) = (1 - eps) f_base(x' | x, dt) + eps g(x' | x),
+        g: position x + N(0, R^2 I), velocity (if any) from the base's stationary law.
+
+    The jump keeps the posterior from being certain of the impossible: when later arrival
+    times fit nowhere near the drift model's prediction, particles re-seeded where they do
+    fit (`rafostrack.recovery`) have a prior density to be weighted by, and the smoother
+    can join a recovered track to what came before.
+    """
+
+    base: MotionModel
+    jump_rate_per_day: float
+    jump_sd_km: float
+
+    @property
+    def name(self) -> str:  # type: ignore[override]
+        return self.base.name
+
+    @property
+    def has_velocity(self) -> bool:  # type: ignore[override]
+        return self.base.has_velocity
+
+    @classmethod
+    def from_config(cls, cfg: MotionConfig) -> MotionModel:
+        raise TypeError("JumpMixture wraps a configured model: build it with JumpMixture(base, rate, sd)")
+
+    def transition(self, dt_days: float) -> LinearGaussian:
+        """The base model's transition (the component without a jump)."""
+        return self.base.transition(dt_days)
+
+    def stationary_velocity(self) -> tuple[NDArray[np.float64], float]:
+        return self.base.stationary_velocity()
+
+    def jump_probability(self, dt_days: float) -> float:
+        return float(-np.expm1(-self.jump_rate_per_day * max(dt_days, 0.0)))
+
+    def jump(self) -> LinearGaussian:
+        """g: position + N(0, R^2 I); velocity replaced by a stationary draw."""
+        r = self.jump_sd_km
+        if not self.has_velocity:
+            return LinearGaussian(A=np.eye(2), b=np.zeros(2), L=r * np.eye(2))
+        mean, sd = self.stationary_velocity()
+        return LinearGaussian(
+            A=np.diag([1.0, 1.0, 0.0, 0.0]), b=np.concatenate([[0.0, 0.0], mean]), L=np.diag([r, r, sd, sd])
+        )
+
+    def components(self, dt_days: float) -> list[tuple[float, LinearGaussian]]:
+        eps = self.jump_probability(dt_days)
+        return [(1.0 - eps, self.base.transition(dt_days)), (eps, self.jump())]
+
+    def initial(self, lat: float, lon: float, sd_km: float, n: int, rng: np.random.Generator) -> Particles:
+        return self.base.initial(lat, lon, sd_km, n, rng)
+
+    def propagate(self, particles: Particles, dt_days: float, rng: np.random.Generator) -> Particles:
+        """The base transition, then each particle replaced by a jump with probability eps."""
+        moved = self.base.propagate(particles, dt_days, rng)
+        jumps = np.flatnonzero(rng.random(len(particles)) < self.jump_probability(dt_days))
+        if len(jumps) == 0:
+            return moved
+        jumped = _Kernel(self.jump(), self.has_velocity).step(particles.take(jumps), rng)
+        return moved.replace_at(jumps, jumped)
+
+
+@dataclass(frozen=True)
+class _Kernel:
+    """Sampling from one linear-Gaussian kernel (used for the jump component)."""
+
+    kernel: LinearGaussian
+    has_velocity: bool
+
+    def step(self, particles: Particles, rng: np.random.Generator) -> Particles:
+        tr, n = self.kernel, len(particles)
+        state = np.zeros((tr.dim, n))
+        if self.has_velocity and particles.velocity_km_per_day is not None:
+            state[2:] = particles.velocity_km_per_day.T
+        moved = np.einsum("ij,jp->ip", tr.A, state) + tr.b[:, None]
+        moved += np.einsum("ij,jp->ip", tr.L, rng.standard_normal((tr.dim, n)))
+        lat, lon = displace(particles.lat, particles.lon, moved[0], moved[1])
+        velocity = np.ascontiguousarray(moved[2:].T) if self.has_velocity else None
+        return Particles(np.clip(lat, -_MAX_LAT, _MAX_LAT), lon, velocity)
