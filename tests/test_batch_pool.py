@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -89,12 +90,71 @@ def test_a_worker_that_cannot_start_says_why_in_the_log_and_the_summary(archive,
     work.mkdir()
     proc = _batch_from(work, archive, env)
     assert proc.returncode == 1, proc.stdout + proc.stderr
-    cause = "ModuleNotFoundError: No module named 'rafostrack.cli'"
     summary = _summary(work / "o")
     assert sorted(summary) == list(FLOAT_IDS)
-    for row in summary.values():
-        assert row["status"] == "failed" and row["reason"] == f"a worker process died: {cause}", row
-    assert f"a worker process died: {cause}" in proc.stdout  # the table
+    reasons = {row["reason"] for row in summary.values()}
+    assert {row["status"] for row in summary.values()} == {"failed"} and len(reasons) == 1, summary
+    reason = reasons.pop()
+    # The shadow package lacks what the worker imports: `__version__` (editable install) or
+    # `rafostrack.cli` (regular install). Either way the worker's own error, on one line.
+    pattern = r"a worker process cannot start: ((?:ImportError|ModuleNotFoundError): .*'rafostrack.*)"
+    cause = re.fullmatch(pattern, reason)
+    assert cause is not None, reason
+    assert "shadow" in reason or "rafostrack.cli" in reason
+    assert reason in proc.stdout  # the table
     log = (work / "o" / "batch.log").read_text()
-    assert f"m/sim1 failed: a worker process died: {cause}" in log
-    assert "Traceback (most recent call last):" in log and cause in log
+    assert f"m/sim1 failed: {reason}" in log and f"m/sim2 failed: {reason}" in log
+    assert "worker stderr: Traceback (most recent call last):" in log
+    assert f"worker stderr: {cause.group(1)}" in log
+
+
+def _rebuild_in_the_batch_process_only(batch_pid: int) -> str:
+    if os.getpid() != batch_pid:
+        raise RuntimeError("this task cannot be rebuilt in a worker")
+    return "task"
+
+
+class _TaskThatKillsItsWorker:
+    """Unpickling it in a worker raises where the pool does not catch it: the worker dies
+    after it has started, with a traceback on its stderr."""
+
+    mission, float_id = "m", "f1"  # what run_local reports a failed task by
+
+    def __reduce__(self):
+        return (_rebuild_in_the_batch_process_only, (os.getpid(),))
+
+
+def test_a_worker_dying_after_start_up_fails_its_float_with_its_last_error():
+    from rafostrack.batch import FAILED, run_local
+
+    written: list[str] = []
+    outcomes = list(run_local([_TaskThatKillsItsWorker()], 1, fn=repr, on_stderr=written.append))
+    assert len(outcomes) == 1 and (outcomes[0].float_id, outcomes[0].status) == ("f1", FAILED)
+    assert outcomes[0].reason == "a worker process died: RuntimeError: this task cannot be rebuilt in a worker"
+    assert len(written) == 1 and "Traceback (most recent call last):" in written[0]
+
+
+def test_last_exception_line_reads_the_last_traceback():
+    from rafostrack.batch.pool import last_exception_line
+
+    text = textwrap.dedent(
+        """\
+        Process ForkServerProcess-1:
+        Traceback (most recent call last):
+          File "x.py", line 1, in <module>
+            import y
+        ImportError: first
+        some warning printed later
+        Traceback (most recent call last):
+        Process ForkServerProcess-2:
+          File "y.py", line 3, in f
+            x = {
+                ^
+        pkg.mod.CustomError: second: with a colon
+        """
+    )
+    assert last_exception_line(text) == "pkg.mod.CustomError: second: with a colon"
+    assert last_exception_line("Traceback (most recent call last):\n  File 'z'\nKeyboardInterrupt\n") == (
+        "KeyboardInterrupt"
+    )
+    assert last_exception_line("no traceback here\nValueError: not after a traceback header\n") is None

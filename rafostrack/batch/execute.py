@@ -12,6 +12,9 @@ Guarantees:
   killed; the next run removes what is left aside (`run.py`).
 - Outputs are installed only while OUT's lock info names this task's run (`lock.py`): a
   worker of a run that has lost the lock installs nothing.
+- A worker whose rafostrack version is not the one the batch process planned with (a Dask
+  worker with another installation) fails the float rather than write outputs the manifest
+  would attribute to another version.
 - The outputs depend only on the task (the float's random numbers come from the seed and
   the float id), not on the worker, the order or the number of workers.
 """
@@ -26,6 +29,7 @@ import traceback
 from datetime import UTC, datetime
 from pathlib import Path
 
+from .. import __version__
 from ..errors import InputError
 from ..outputs import write_json
 from .lock import read_lock_info
@@ -38,6 +42,10 @@ def process_float(task: FloatTask) -> FloatOutcome:
     from ..pipeline import TrackInputs, track_float
 
     started = time.perf_counter()
+    planned_version = task.components.get("rafostrack_version", __version__)
+    if planned_version != __version__:  # a Dask worker with another installation, say
+        reason = f"this worker runs rafostrack {__version__}, the batch process {planned_version}; install the same"
+        return FloatOutcome(task.mission, task.float_id, FAILED, reason)
     staging = task.out_dir.parent / f".{task.float_id}.tmp-{os.getpid()}"
     try:
         if staging.exists():

@@ -160,7 +160,10 @@ def _run_locked(
     reporter.start(len(tasks))
     outcomes = list(known)
     try:
-        runner = run_dask(tasks, client) if client is not None else run_local(tasks, options.jobs)
+        if client is not None:
+            runner = run_dask(tasks, client)
+        else:
+            runner = run_local(tasks, options.jobs, on_stderr=lambda text: _log_worker_stderr(reporter, text, out))
         for outcome in runner:
             outcomes.append(outcome)
             reporter.done(outcome)
@@ -172,6 +175,13 @@ def _run_locked(
     write_text_atomic(out / SUMMARY_NAME, summary_csv(outcomes))
     write_text_atomic(out / LOG_NAME, "\n".join(reporter.lines) + "\n")
     return outcomes, table
+
+
+def _log_worker_stderr(reporter: Reporter, text: str, out: Path) -> None:
+    """What the local workers wrote on stderr goes to batch.log, with a line saying so."""
+    lines = text.rstrip("\n").splitlines()
+    reporter.log(f"the local worker processes wrote {len(lines)} line(s) on stderr, kept in {Path(out) / LOG_NAME}")
+    reporter.lines.extend(f"  worker stderr: {line}" for line in lines)
 
 
 def clean_stale(out: Path, missions: Iterable[Mission], log: Callable[[str], None]) -> None:
