@@ -8,6 +8,7 @@ The tree: 2 simulated missions (`m1`, `deep/m2`) x 3 floats of 12 days, 150 part
 from __future__ import annotations
 
 import csv
+import dataclasses
 import fcntl
 import io
 import json
@@ -274,6 +275,20 @@ def test_a_worker_never_installs_a_float_once_its_run_lost_the_lock(tree, tmp_pa
     (out / b.LOCK_INFO_NAME).write_text(json.dumps({"pid": 1, "host": "h", "started": "s", "run_id": "killed-run"}))
     assert b.process_float(task).status == b.PROCESSED
     assert sorted(p.name for p in (out / "m1").iterdir()) == ["sim1"] and (out / "m1" / "sim1" / b.MANIFEST).is_file()
+
+
+def test_a_worker_with_another_rafostrack_version_writes_nothing(tree, tmp_path):
+    """Outputs are byte-identical between workers running the same installation; a worker
+    running another version (a Dask worker, say) fails the float instead of writing outputs
+    that the manifest would attribute to the batch process's version."""
+    out = tmp_path / "out"
+    missions = [m for m in b.discover([tree]) if m.name == "m1"]
+    tasks, _ = b.plan(missions, out, plots=False)
+    task = next(t for t in tasks if t.float_id == "sim1")
+    other = dataclasses.replace(task, components={**task.components, "rafostrack_version": "0.0.1"})
+    outcome = b.process_float(other)
+    assert outcome.status == b.FAILED and "the batch process 0.0.1" in outcome.reason
+    assert not out.exists()
 
 
 def test_sigkill_leaves_no_partial_output_and_a_rerun_finishes(work_tree, tmp_path):

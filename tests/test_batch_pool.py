@@ -158,3 +158,12 @@ def test_last_exception_line_reads_the_last_traceback():
         "KeyboardInterrupt"
     )
     assert last_exception_line("no traceback here\nValueError: not after a traceback header\n") is None
+
+
+def test_a_worker_checks_it_runs_the_batch_process_rafostrack(tmp_path):
+    from rafostrack.batch.pool import PACKAGE_DIR, check_worker
+
+    assert Path(PACKAGE_DIR, "batch", "pool.py").is_file()
+    check_worker(PACKAGE_DIR)  # the same: no error
+    with pytest.raises(RuntimeError, match=f"this worker imports rafostrack from {PACKAGE_DIR}, the batch process"):
+        check_worker(str(tmp_path / "rafostrack"))
