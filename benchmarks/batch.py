@@ -1,8 +1,9 @@
 """Wall time of `rafostrack batch` on a simulated 24-float mission, with --jobs 1 and --jobs 2.
 
 Simulates the synthetic scenario (24 floats, 60 days, seed 0) into a temporary directory,
-runs `rafostrack batch` with each --jobs value as a fresh process, as cron would (every run
-after the first with --force, so all floats are tracked every time; no plots), and prints
+runs the installed `rafostrack batch` with each --jobs value as a fresh process, as cron
+would (every run after the first with --force, so all floats are tracked every time; no
+plots), and prints
 wall times (start-up included), the speed-up over the first and whether the Parquet outputs
 are byte-identical across runs.
 
@@ -12,6 +13,7 @@ are byte-identical across runs.
 from __future__ import annotations
 
 import argparse
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -26,7 +28,13 @@ from rafostrack.io.mission_writer import write_mission
 from rafostrack.scenarios import synthetic_scenario
 from rafostrack.simulate import simulate_mission
 
-RAFOSTRACK = [sys.executable, "-c", "from rafostrack.cli import main; main()"]
+
+def _rafostrack() -> list[str]:
+    """The installed `rafostrack` entry point beside this Python, as cron runs it."""
+    exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
+    if exe is None:
+        raise SystemExit("no rafostrack entry point beside this Python: pip install -e . first")
+    return [exe]
 
 
 def _parquet(out: Path) -> dict[str, bytes]:
@@ -57,7 +65,7 @@ def main() -> None:
         out = Path(tmp) / "out"
         first_time = reference = None
         for i, jobs in enumerate(args.jobs):
-            command = [*RAFOSTRACK, "batch", str(mission.parent), "--out", str(out), "--jobs", str(jobs)]
+            command = [*_rafostrack(), "batch", str(mission.parent), "--out", str(out), "--jobs", str(jobs)]
             command += ["--force"] * (i > 0) + ["--no-plots"] * (not args.plots)
             started = time.perf_counter()
             proc = subprocess.run(command, capture_output=True, text=True, check=False)

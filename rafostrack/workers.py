@@ -16,17 +16,24 @@ MATH_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
 
 
 @contextlib.contextmanager
-def single_threaded_math() -> Iterator[None]:
-    """While worker processes start, set the math libraries' thread counts to 1 in the
-    environment they inherit, unless the user set them."""
-    saved = {name: os.environ.get(name) for name in MATH_THREAD_VARS}
-    for name in MATH_THREAD_VARS:
-        os.environ.setdefault(name, "1")
+def environment(values: dict[str, str], *, keep_existing: bool = False) -> Iterator[None]:
+    """Set environment variables (those already set stay, with `keep_existing`) for the
+    duration, then restore the environment as it was."""
+    saved = {name: os.environ.get(name) for name in values}
+    for name, value in values.items():
+        if not (keep_existing and name in os.environ):
+            os.environ[name] = value
     try:
         yield
     finally:
-        for name, value in saved.items():
-            if value is None:
+        for name, old in saved.items():
+            if old is None:
                 os.environ.pop(name, None)
             else:
-                os.environ[name] = value
+                os.environ[name] = old
+
+
+def single_threaded_math() -> contextlib.AbstractContextManager[None]:
+    """While worker processes start, set the math libraries' thread counts to 1 in the
+    environment they inherit, unless the user set them."""
+    return environment(dict.fromkeys(MATH_THREAD_VARS, "1"), keep_existing=True)

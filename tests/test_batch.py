@@ -8,6 +8,8 @@ The tree: 2 simulated missions (`m1`, `deep/m2`) x 3 floats of 12 days, 150 part
 from __future__ import annotations
 
 import csv
+import dataclasses
+import fcntl
 import io
 import json
 import os
@@ -23,6 +25,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
+from support import parquet_bytes, timing_free
 
 from rafostrack import batch as b
 from rafostrack.cli import main
@@ -84,6 +87,17 @@ def _complete(out: Path) -> set[tuple[str, str]]:
     return {(m, f) for m, f in FLOATS if (out / m / f / b.MANIFEST).is_file()}
 
 
+def _lock_is_free(out: Path) -> bool:
+    """Whether OUT's lock can be taken now (an flock of our own, independent of filelock)."""
+    with open(out / b.LOCK_NAME, "a") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return False
+        fcntl.flock(fh, fcntl.LOCK_UN)
+        return True
+
+
 def _parquet_bytes(out: Path) -> dict[str, bytes]:
     return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*.parquet"))}
 
@@ -128,7 +142,8 @@ def test_discovery_mirrors_the_tree(tree, baseline):
     for m, f in FLOATS:
         names = {p.name for p in (baseline / m / f).iterdir()}
         assert {"track.parquet", "labels.parquet", "run.json", b.MANIFEST} <= names
-    assert not list(baseline.rglob(".*tmp*")) and not (baseline / b.LOCK_NAME).exists()
+    assert not list(baseline.rglob(".*tmp*")) and not (baseline / b.LOCK_INFO_NAME).exists()
+    assert _lock_is_free(baseline)
     assert (baseline / "batch.log").read_text().count("processed") >= 6
 
 
@@ -246,6 +261,39 @@ def test_local_workers_run_math_libraries_single_threaded(monkeypatch):
     assert "OPENBLAS_NUM_THREADS" not in os.environ  # the batch process itself is left alone
 
 
+def test_a_worker_never_installs_a_float_once_its_run_lost_the_lock(tree, tmp_path):
+    """A worker still going after its run was killed and another run took the lock (a Dask
+    worker, say) leaves OUT as the new run made it."""
+    out = tmp_path / "out"
+    (out / "m1").mkdir(parents=True)
+    missions = [m for m in b.discover([tree]) if m.name == "m1"]
+    tasks, _ = b.plan(missions, out, overrides={"filter": {"particles": 50}}, plots=False, run_id="killed-run")
+    task = next(t for t in tasks if t.float_id == "sim1")
+    (out / b.LOCK_INFO_NAME).write_text(json.dumps({"pid": 1, "host": "h", "started": "s", "run_id": "new-run"}))
+    outcome = b.process_float(task)
+    assert outcome.status == b.FAILED and "no longer holds the lock" in outcome.reason
+    assert sorted(p.name for p in (out / "m1").iterdir()) == []  # nothing installed, nothing left aside
+
+    # The same task while its run holds the lock is installed (the check above can fail).
+    (out / b.LOCK_INFO_NAME).write_text(json.dumps({"pid": 1, "host": "h", "started": "s", "run_id": "killed-run"}))
+    assert b.process_float(task).status == b.PROCESSED
+    assert sorted(p.name for p in (out / "m1").iterdir()) == ["sim1"] and (out / "m1" / "sim1" / b.MANIFEST).is_file()
+
+
+def test_a_worker_with_another_rafostrack_version_writes_nothing(tree, tmp_path):
+    """Outputs are byte-identical between workers running the same installation; a worker
+    running another version (a Dask worker, say) fails the float instead of writing outputs
+    that the manifest would attribute to the batch process's version."""
+    out = tmp_path / "out"
+    missions = [m for m in b.discover([tree]) if m.name == "m1"]
+    tasks, _ = b.plan(missions, out, plots=False)
+    task = next(t for t in tasks if t.float_id == "sim1")
+    other = dataclasses.replace(task, components={**task.components, "rafostrack_version": "0.0.1"})
+    outcome = b.process_float(other)
+    assert outcome.status == b.FAILED and "the batch process 0.0.1" in outcome.reason
+    assert not out.exists()
+
+
 def test_sigkill_leaves_no_partial_output_and_a_rerun_finishes(work_tree, tmp_path):
     out = tmp_path / "out"
     cfg = _slow_config(tmp_path)
@@ -259,7 +307,8 @@ def test_sigkill_leaves_no_partial_output_and_a_rerun_finishes(work_tree, tmp_pa
     time.sleep(0.3)  # its worker dies with it (it watches a pipe from the batch process)
     done = _complete(out)
     assert 1 <= len(done) < len(FLOATS), "the run was not caught mid-way"
-    assert (out / b.LOCK_NAME).exists()  # left behind by the killed run
+    assert (out / b.LOCK_INFO_NAME).exists()  # left behind by the killed run ...
+    assert _lock_is_free(out)  # ... but the kernel released its lock: nothing blocks the next run
 
     for path in out.rglob("*.parquet"):  # everything written so far reads back in full
         pq.read_table(path)
@@ -271,12 +320,12 @@ def test_sigkill_leaves_no_partial_output_and_a_rerun_finishes(work_tree, tmp_pa
         main, ["batch", str(work_tree), "--out", str(out), "--no-plots", "--config", str(cfg), "--jobs", "2"]
     )
     assert result.exit_code == 0, result.output
-    assert "taking over a stale lock" in result.output
+    assert "did not finish; its lock was released when it ended" in result.output
     statuses = _statuses(out)
     assert statuses["skipped"] == done
     assert statuses["processed"] == set(FLOATS) - done
     assert _complete(out) == set(FLOATS)
-    assert not [p for p in out.rglob(".*") if p.name != ".rafostrack-batch.lock.guard"]
+    assert not [p for p in out.rglob(".*") if p.name != b.LOCK_NAME]
     for path in out.rglob("*.parquet"):
         pq.read_table(path)
 
@@ -287,11 +336,13 @@ def test_a_second_concurrent_run_does_not_write(work_tree, tmp_path):
     args = ["batch", str(work_tree), "--out", str(out), "--no-plots", "--config", str(cfg)]
     first = _start(args, tmp_path / "first")
     try:
-        _wait_for(lambda: (out / b.LOCK_NAME).is_file(), 60, "the first run's lock", first)
+        _wait_for(lambda: (out / b.LOCK_INFO_NAME).is_file(), 60, "the first run's lock", first)
         second = _batch(work_tree, out, "--config", str(cfg))
         assert first.poll() is None, "the first run ended too soon for this test"
         assert second.exit_code == 2, second.output
-        assert "another batch run" in second.output and f"pid {first.pid}" in second.output
+        holder = json.loads((out / b.LOCK_INFO_NAME).read_text())
+        assert "another batch run" in second.output
+        assert f"pid {first.pid} on {socket.gethostname()}, started {holder['started']}" in second.output
         assert not (out / "batch-summary.csv").exists()  # the second run wrote nothing
         first.wait(timeout=120)
     finally:
@@ -299,38 +350,44 @@ def test_a_second_concurrent_run_does_not_write(work_tree, tmp_path):
             first.kill()
     assert first.returncode == 0, (tmp_path / "first.err").read_text()
     assert "6 processed" in (tmp_path / "first.out").read_text()
-    assert _complete(out) == set(FLOATS) and not (out / b.LOCK_NAME).exists()
+    assert _complete(out) == set(FLOATS) and not (out / b.LOCK_INFO_NAME).exists() and _lock_is_free(out)
 
 
-def test_stale_lock_and_temporaries_are_cleaned(tree, baseline, tmp_path):
+def test_a_killed_runs_lock_and_temporaries_are_cleaned(tree, baseline, tmp_path):
+    """What a killed run leaves: its lock info, temporaries; and a lock file in the format of
+    the hand-written lock of earlier versions, which no longer means anything."""
     out = Path(shutil.copytree(baseline, tmp_path / "out"))
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     lock = {"pid": dead.pid, "host": socket.gethostname(), "started": "2020-01-01T00:00:00+00:00"}
     (out / b.LOCK_NAME).write_text(json.dumps(lock))
+    (out / b.LOCK_INFO_NAME).write_text(json.dumps({**lock, "run_id": "0" * 32}))
     (out / "m1" / ".sim1.tmp-123").mkdir()
     (out / "m1" / ".sim1.tmp-123" / "track.parquet").write_bytes(b"PAR1 truncated")
     (out / "deep" / "m2" / ".sim3.trash-77").mkdir()
     (out / ".batch.log.x1y2.tmp").write_text("partial")
     result = _batch(tree, out)
     assert result.exit_code == 0, result.output
-    assert f"taking over a stale lock {out / b.LOCK_NAME} (pid {dead.pid}" in result.output
+    assert f"previous batch run on this output directory (pid {dead.pid} on {socket.gethostname()}" in result.output
     assert not (out / "m1" / ".sim1.tmp-123").exists() and not (out / "deep" / "m2" / ".sim3.trash-77").exists()
     assert not (out / ".batch.log.x1y2.tmp").exists()
     assert _statuses(out)["skipped"] == set(FLOATS)  # outputs are relocatable: paths are not hashed
-    assert not (out / b.LOCK_NAME).exists()
+    assert not (out / b.LOCK_INFO_NAME).exists() and _lock_is_free(out)
 
 
-def test_a_live_lock_is_respected(tree, tmp_path):
+def test_a_held_lock_is_respected(tree, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
-    me = {"pid": os.getpid(), "host": socket.gethostname(), "started": "now", "proc_start": b._proc_start(os.getpid())}
-    (out / b.LOCK_NAME).write_text(json.dumps(me))
-    result = _batch(tree, out)
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "started": "2030-01-01T00:00:00+00:00", "run_id": "x"}
+    (out / b.LOCK_INFO_NAME).write_text(json.dumps(me))
+    with open(out / b.LOCK_NAME, "a") as held:
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)  # as another run holds it
+        result = _batch(tree, out)
     assert result.exit_code == 2
     assert "another batch run" in result.output and "not starting" in result.output
-    assert json.loads((out / b.LOCK_NAME).read_text()) == me  # untouched
-    assert sorted(p.name for p in out.iterdir()) == [b.LOCK_NAME]
+    assert f"pid {os.getpid()} on {socket.gethostname()}, started 2030-01-01T00:00:00+00:00" in result.output
+    assert json.loads((out / b.LOCK_INFO_NAME).read_text()) == me  # untouched
+    assert sorted(p.name for p in out.iterdir()) == [b.LOCK_NAME, b.LOCK_INFO_NAME]
 
 
 @pytest.mark.parametrize(
@@ -368,10 +425,36 @@ def test_progress_bar_on_a_terminal_and_lines_otherwise():
         for outcome in outcomes:
             reporter.done(outcome)
         reporter.finish()
-    assert "\r[" in tty.getvalue() and "2/2" in tty.getvalue()
+    assert "\r" in tty.getvalue() and "2/2" in tty.getvalue()
     assert "m1/sim2 failed: sim2.csv: line 3: bad\n" in tty.getvalue()
     assert "\r" not in plain.getvalue()
     assert plain.getvalue().splitlines() == [
         "rafostrack batch: [1/2] m1/sim1 processed in 1.0 s (new)",
         "rafostrack batch: [2/2] m1/sim2 failed: sim2.csv: line 3: bad",
     ]
+
+
+@pytest.mark.reliability
+def test_batch_jobs_do_not_changeparquet_bytes(tmp_path):
+    """`batch --jobs 1` and `--jobs 2` (run as subprocesses: worker pools stay out of the
+    test process) and `track` give the same Parquet bytes."""
+    if "batch" not in main.commands:
+        pytest.skip("no batch command")
+    exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
+    mission = tmp_path / "m"
+    result = CliRunner().invoke(main, ["simulate", str(mission), "--days", "10", "--n-floats", "2", "--seed", "4"])
+    assert result.exit_code == 0, result.output
+    with open(mission / "rafostrack.toml", "a") as fh:
+        fh.write("\n[filter]\nparticles = 100\n")
+    for jobs in ("1", "2"):
+        args = [exe, "batch", str(mission), "--out", str(tmp_path / jobs), "--jobs", jobs, "--no-plots"]
+        proc = subprocess.run(args, capture_output=True, text=True, check=False, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+    result = CliRunner().invoke(main, ["track", str(mission / "sim2.csv"), "--out", str(tmp_path / "t"), "--no-plots"])
+    assert result.exit_code == 0, result.output
+    for fid in ("sim1", "sim2"):
+        one, two = (next((tmp_path / j).rglob(fid)) for j in ("1", "2"))
+        assert parquet_bytes(one) and parquet_bytes(one) == parquet_bytes(two)
+        run_1, run_2 = (json.loads((d / "run.json").read_text()) for d in (one, two))
+        assert timing_free(run_1) == timing_free(run_2)
+    assert parquet_bytes(tmp_path / "t" / "sim2") == parquet_bytes(next((tmp_path / "2").rglob("sim2")))

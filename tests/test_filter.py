@@ -27,7 +27,9 @@ def test_non_finite_likelihoods_are_dropped_or_skipped_with_a_warning(sim_missio
     """If the likelihood of a step is NaN for some particles, they get zero weight; if for all,
     the step is skipped. Either way the run finishes with finite output and a warning."""
     sim = sim_mission.floats[0]
-    config = with_overrides(load_config(), filter={"particles": 200}, smoother={"enabled": False})
+    config = with_overrides(
+        load_config(), filter={"particles": 200}, smoother={"enabled": False}, recovery={"enabled": False}
+    )  # recovery off: its searches would call the patched likelihood too
     original = RankedArrivals.evaluate
     calls = {"n": 0}
 

@@ -1,0 +1,223 @@
+"""Decide, for every float, whether it must be tracked and why: keys, manifests, what changed.
+
+Guarantees:
+
+- Each float gets a key, the SHA-256 over its arrival file's bytes, the bytes of its
+  mission's `beacons.csv`, its own row of `floats.csv`, the effective configuration (every
+  layer, loaded as `track` loads it), the package version and the plots option. Paths are
+  not hashed: an output tree can be moved with its inputs.
+- A float is skipped only when its output directory holds a `batch-manifest.json` with the
+  same key and every file the manifest lists is there with its recorded size. Otherwise it
+  becomes a task whose `why` names what changed (`float file changed`, `beacons.csv
+  changed`, `config changed`, ...), or `new`, `forced`, `outputs incomplete`.
+- Floats that cannot run (unreadable `floats.csv` or `beacons.csv`, a bad mission config, a
+  float id that cannot name a directory) fail here with a one-line reason; a listed float
+  without its arrival file is skipped (not recovered yet). Nothing here writes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .. import __version__
+from ..config import load_config
+from ..errors import InputError
+from ..io.writers import file_digest
+from .discover import Mission
+from .lock import LOCK_INFO_NAME
+
+MANIFEST = "batch-manifest.json"
+MANIFEST_FORMAT = 1
+
+PROCESSED, SKIPPED, FAILED = "processed", "skipped", "failed"
+
+
+@dataclass(frozen=True)
+class FloatTask:
+    """Everything a worker needs to track one float and install its outputs (picklable)."""
+
+    mission: str
+    float_id: str
+    float_path: Path
+    out_dir: Path  # OUT/<mission>/<float_id>, the final location
+    config_files: tuple[Path, ...]
+    overrides: dict[str, dict[str, Any]]
+    plots: bool
+    key: str
+    components: dict[str, Any]
+    why: str  # why it is (re)processed: "new", "float file changed", "forced", ...
+    lock_info_path: Path  # OUT/.rafostrack-batch.lock.json: names the run holding OUT's lock
+    run_id: str  # this run's id: a worker installs outputs only while the lock info names it
+
+
+@dataclass
+class FloatOutcome:
+    """What became of one float: one row of batch-summary.csv."""
+
+    mission: str
+    float_id: str
+    status: str  # processed / skipped / failed
+    reason: str = ""
+    seconds: float | None = None
+    warnings: int | None = None
+    output: str = ""
+    detail: str = ""  # traceback of an unexpected exception, for batch.log
+
+    def row(self) -> dict[str, Any]:
+        seconds = "" if self.seconds is None else f"{self.seconds:.2f}"
+        warnings = "" if self.warnings is None else self.warnings
+        return dict(
+            mission=self.mission,
+            float_id=self.float_id,
+            status=self.status,
+            reason=self.reason,
+            seconds=seconds,
+            warnings=warnings,
+            output=self.output,
+        )
+
+
+_COMPONENT_NAMES = {
+    "float_file_sha256": "float file changed",
+    "beacons_sha256": "beacons.csv changed",
+    "floats_row_sha256": "floats.csv row changed",
+    "config_sha256": "config changed",
+    "rafostrack_version": "package version changed",
+    "plots": "plots option changed",
+}
+
+
+def _sha256_json(value: Any) -> str:
+    return hashlib.sha256(json.dumps(value, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def read_manifest(out_dir: Path) -> dict[str, Any] | None:
+    """The float directory's manifest, or None when it is missing or unreadable."""
+    try:
+        data = json.loads((out_dir / MANIFEST).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def _is_complete(out_dir: Path, manifest: dict[str, Any]) -> bool:
+    files = manifest.get("files")
+    if not isinstance(files, dict) or not files:
+        return False
+    for name, size in files.items():
+        try:
+            if (out_dir / name).stat().st_size != size:
+                return False
+        except OSError:
+            return False
+    return True
+
+
+def _why(out_dir: Path, key: str, components: dict[str, Any], force: bool) -> str | None:
+    """None when the outputs are complete and made from the same inputs; else the reason."""
+    manifest = read_manifest(out_dir)
+    if manifest is None:
+        if out_dir.exists():
+            return "no batch manifest (incomplete, or written by another command)"
+        return "new"
+    if manifest.get("key") != key:
+        old = manifest.get("components") or {}
+        changed = [text for name, text in _COMPONENT_NAMES.items() if old.get(name) != components.get(name)]
+        return ", ".join(changed) or "inputs changed"
+    if not _is_complete(out_dir, manifest):
+        return "outputs incomplete (a file listed in the manifest is missing or changed)"
+    return "forced" if force else None
+
+
+def plan(
+    missions: Sequence[Mission],
+    out: Path,
+    *,
+    config_files: tuple[Path, ...] = (),
+    overrides: dict[str, dict[str, Any]] | None = None,
+    plots: bool = True,
+    force: bool = False,
+    run_id: str = "",
+) -> tuple[list[FloatTask], list[FloatOutcome]]:
+    """Split every float into work to do (tasks) and outcomes known now (skipped, or failed
+    before running: unreadable floats.csv, bad mission config, missing arrival file)."""
+    from ..pipeline import TrackInputs
+
+    overrides = overrides or {}
+    out = Path(out).resolve()
+    tasks: list[FloatTask] = []
+    known: list[FloatOutcome] = []
+    for mission in missions:
+        mission_out = out / mission.name
+        try:
+            beacons_sha = file_digest(mission.path / "beacons.csv")
+        except OSError as exc:
+            beacons_sha, beacons_error = "", f"{mission.path / 'beacons.csv'}: cannot read: {exc.strerror or exc}"
+        else:
+            beacons_error = ""
+        for float_id, row in sorted(mission.rows.items()):
+            float_path = mission.path / f"{float_id}.csv"
+            out_dir = mission_out / float_id
+            fail = _known_failure(mission, float_id, float_path, beacons_error)
+            if fail is not None:
+                status, reason = fail
+                known.append(FloatOutcome(mission.name, float_id, status, reason))
+                continue
+            inputs = TrackInputs(float_path=float_path, config_files=tuple(config_files), overrides=overrides)
+            try:
+                config = load_config(inputs.config_layers(), inputs.overrides).to_dict()
+                float_sha = file_digest(float_path)
+            except InputError as exc:
+                known.append(FloatOutcome(mission.name, float_id, FAILED, str(exc)))
+                continue
+            except OSError as exc:
+                known.append(FloatOutcome(mission.name, float_id, FAILED, f"{float_path}: {exc.strerror or exc}"))
+                continue
+            components = {
+                "float_file_sha256": float_sha,
+                "beacons_sha256": beacons_sha,
+                "floats_row_sha256": _sha256_json(row),
+                "config_sha256": _sha256_json(config),
+                "rafostrack_version": __version__,
+                "plots": bool(plots),
+            }
+            key = _sha256_json({"format": MANIFEST_FORMAT, **components})
+            why = _why(out_dir, key, components, force)
+            if why is None:
+                known.append(FloatOutcome(mission.name, float_id, SKIPPED, "unchanged", output=str(out_dir)))
+                continue
+            tasks.append(
+                FloatTask(
+                    mission=mission.name,
+                    float_id=float_id,
+                    float_path=float_path,
+                    out_dir=out_dir,
+                    config_files=tuple(config_files),
+                    overrides=overrides,
+                    plots=plots,
+                    key=key,
+                    components=components,
+                    why=why,
+                    lock_info_path=out / LOCK_INFO_NAME,
+                    run_id=run_id,
+                )
+            )
+    return tasks, known
+
+
+def _known_failure(mission: Mission, float_id: str, float_path: Path, beacons_error: str) -> tuple[str, str] | None:
+    if mission.error is not None:
+        return FAILED, mission.error
+    if beacons_error:
+        return FAILED, beacons_error
+    if float_id in ("", ".", "..") or float_id.startswith(".") or any(c in float_id for c in "/\\"):
+        return FAILED, f"{mission.path / 'floats.csv'}: float_id {float_id!r} cannot name an output directory"
+    if not float_path.is_file():
+        # Listed but not (yet) there: e.g. a float not recovered yet. Not a failure.
+        return SKIPPED, f"no arrival file {float_path.name} (listed in floats.csv)"
+    return None

@@ -1,0 +1,131 @@
+"""What a batch run tells: progress, the summary table, `batch-summary.csv` and `batch.log`.
+
+Guarantees:
+
+- On a terminal, a progress bar (`tqdm`) with the counts processed and failed; failures and
+  other messages are printed above it. Otherwise (cron, a pipe) no bar and no carriage
+  returns: one plain line per float, `rafostrack batch: [n/total] <mission>/<float> ...`.
+- Every message, every float's line and the traceback of any unexpected error are kept for
+  `batch.log`, each line time-stamped (UTC).
+- The summary table lists every float processed or failed, with its reason, and the totals
+  (skipped floats are counted; all floats are listed in `batch-summary.csv`, one row each,
+  columns `SUMMARY_COLUMNS`). `run.py` writes both files atomically at the end of the run.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import time
+from collections.abc import Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import TextIO
+
+from tqdm import tqdm
+
+from .plan import FAILED, PROCESSED, SKIPPED, FloatOutcome
+
+SUMMARY_NAME = "batch-summary.csv"
+LOG_NAME = "batch.log"
+SUMMARY_COLUMNS = ("mission", "float_id", "status", "reason", "seconds", "warnings", "output")
+
+_BAR_FORMAT = "{percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} floats [{elapsed}<{remaining}{postfix}]"
+
+
+class Reporter:
+    """Progress and log lines. On a terminal: a progress bar with log lines above it;
+    otherwise (cron) one plain line per event. Every line also goes to `lines` (batch.log)."""
+
+    def __init__(self, stream: TextIO, tty: bool):
+        self.stream = stream
+        self.tty = tty
+        self.lines: list[str] = []
+        self.total = 0
+        self.counts = {PROCESSED: 0, FAILED: 0}
+        self.started = time.monotonic()
+        self._bar: tqdm | None = None
+
+    def log(self, message: str, console: bool = True) -> None:
+        stamp = datetime.now(UTC).isoformat(timespec="seconds")
+        self.lines.append(f"{stamp} {message}")
+        if not console:
+            return
+        text = f"rafostrack batch: {message}"
+        if self._bar is not None:
+            self._bar.write(text, file=self.stream)  # clears the bar, writes the line, redraws the bar
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def start(self, total: int) -> None:
+        self.total = total
+        self.started = time.monotonic()
+        if self.tty and total:
+            self._bar = tqdm(
+                total=total,
+                file=self.stream,
+                bar_format=_BAR_FORMAT,
+                dynamic_ncols=True,
+                leave=False,
+                mininterval=0.2,
+            )
+            self._bar.set_postfix_str(self._counts_text(), refresh=True)
+
+    def done(self, outcome: FloatOutcome) -> None:
+        self.counts[outcome.status] = self.counts.get(outcome.status, 0) + 1
+        n = sum(self.counts.values())
+        where = f"{outcome.mission}/{outcome.float_id}"
+        if outcome.status == PROCESSED:
+            took = f" in {outcome.seconds:.1f} s" if outcome.seconds is not None else ""
+            warn = f", {outcome.warnings} input warning(s)" if outcome.warnings else ""
+            message = f"[{n}/{self.total}] {where} processed{took} ({outcome.reason}{warn})"
+        else:
+            message = f"[{n}/{self.total}] {where} {outcome.status}: {outcome.reason}"
+        # On a terminal only failures interrupt the bar; under cron every float gets a line.
+        self.log(message, console=not self.tty or outcome.status == FAILED)
+        if outcome.detail:
+            self.lines.append(outcome.detail.rstrip())
+        if self._bar is not None:
+            self._bar.set_postfix_str(self._counts_text(), refresh=False)
+            self._bar.update(1)
+
+    def finish(self) -> None:
+        if self._bar is not None:
+            self._bar.close()  # leave=False: the bar is erased; the summary table follows
+            self._bar = None
+        self.stream.flush()
+
+    def _counts_text(self) -> str:
+        return f"processed {self.counts[PROCESSED]}, failed {self.counts[FAILED]}"
+
+
+def summary_table(outcomes: Sequence[FloatOutcome], elapsed_s: float, out: Path) -> str:
+    """The table printed at the end: every float processed or failed (skipped ones are
+    counted; all are listed in batch-summary.csv), then the totals."""
+    counts = {s: sum(o.status == s for o in outcomes) for s in (PROCESSED, SKIPPED, FAILED)}
+    shown = [o for o in outcomes if o.status != SKIPPED or o.reason != "unchanged"]
+    lines = []
+    if shown:
+        header = ("mission", "float_id", "status", "seconds", "reason")
+        rows = [(o.mission, o.float_id, o.status, o.row()["seconds"], o.reason) for o in shown]
+        widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(4)]
+        for r in [header, *rows]:
+            lines.append("  ".join(str(r[i]).ljust(widths[i]) for i in range(4)) + "  " + str(r[4]))
+    unchanged = len(outcomes) - len(shown)
+    lines.append(
+        f"{len(outcomes)} floats: {counts[PROCESSED]} processed, {counts[SKIPPED]} skipped"
+        f"{f' ({unchanged} unchanged)' if unchanged else ''}, {counts[FAILED]} failed in {elapsed_s:.1f} s"
+    )
+    lines.append(f"summary: {Path(out) / SUMMARY_NAME}  log: {Path(out) / LOG_NAME}")
+    return "\n".join(lines)
+
+
+def summary_csv(outcomes: Sequence[FloatOutcome]) -> str:
+    """The text of batch-summary.csv: a header and one row per float."""
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for outcome in outcomes:
+        writer.writerow(outcome.row())
+    return buf.getvalue()

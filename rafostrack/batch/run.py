@@ -1,0 +1,202 @@
+"""`run_batch`: the whole run, in order: check the options, discover, lock, clean, plan, run, report.
+
+Guarantees:
+
+- Usage problems (a bad root, no missions, an unreadable `--config`, a bad `--jobs`, an
+  unreachable scheduler, OUT locked by another run) raise `InputError` (exit code 2) before
+  anything is written in OUT.
+- Everything that writes in OUT happens while holding OUT's lock (`lock.py`): first the
+  temporary directories and files a killed run left in OUT are removed, then the floats are
+  planned and run, then `batch-summary.csv` and `batch.log` are written atomically.
+- The result's exit code is 0 when no float failed, 1 when some did.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import socket
+import sys
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from .. import __version__
+from ..config import load_config
+from ..errors import InputError
+from .discover import Mission, discover
+from .lock import BatchLock
+from .plan import FAILED, SKIPPED, FloatOutcome, plan
+from .pool import dask_client, run_dask, run_local
+from .report import LOG_NAME, SUMMARY_NAME, Reporter, summary_csv, summary_table
+
+_STALE_DIR = re.compile(r"^\..+\.(tmp|trash)-\d+$")  # .<float_id>.tmp-<pid>, .<float_id>.trash-<pid>
+_STALE_FILE = re.compile(r"^\..+\.tmp$")  # atomic_path's temporary files
+
+
+def default_jobs() -> int:
+    """The cores this process may use (its CPU affinity where known, else all)."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+@dataclass
+class BatchResult:
+    outcomes: list[FloatOutcome]
+    exit_code: int  # 0 all good, 1 some floats failed
+    summary: str  # the table to print
+
+    def count(self, status: str) -> int:
+        return sum(o.status == status for o in self.outcomes)
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    roots: tuple[Path, ...]
+    out: Path
+    jobs: int
+    force: bool
+    scheduler: str | None
+    config_files: tuple[Path, ...]
+    overrides: dict[str, dict[str, Any]]
+    plots: bool
+
+
+def run_batch(
+    roots: Sequence[Path],
+    out: Path,
+    *,
+    jobs: int | None = None,
+    force: bool = False,
+    scheduler: str | None = None,
+    config_file: Path | None = None,
+    overrides: dict[str, dict[str, Any]] | None = None,
+    plots: bool = True,
+    stream: TextIO | None = None,
+    tty: bool | None = None,
+) -> BatchResult:
+    """Discover, plan, run and report (see the package docstring). Usage problems (a bad root,
+    no missions, a bad --config, an unreachable scheduler, OUT locked by another run) raise
+    `InputError` before anything is written."""
+    stream = stream if stream is not None else sys.stderr
+    tty = tty if tty is not None else bool(getattr(stream, "isatty", lambda: False)())
+    jobs = jobs if jobs is not None else default_jobs()
+    if jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    options = BatchOptions(
+        roots=tuple(Path(r) for r in roots),
+        out=Path(out),
+        jobs=jobs,
+        force=force,
+        scheduler=scheduler,
+        config_files=(Path(config_file).resolve(),) if config_file is not None else (),
+        overrides=overrides or {},
+        plots=plots,
+    )
+    load_config(options.config_files, options.overrides)  # a bad --config or flag: exit 2
+    missions = discover(options.roots, exclude=options.out)
+    if not missions:
+        raise InputError(
+            f"no mission directories under {', '.join(map(str, roots))} "
+            "(a mission directory holds beacons.csv, floats.csv and <float_id>.csv files)"
+        )
+    client = dask_client(scheduler) if scheduler else None
+    try:
+        options.out.mkdir(parents=True, exist_ok=True)
+        reporter = Reporter(stream, tty)
+        with BatchLock(options.out, reporter.log) as lock:
+            outcomes, table = _run_locked(options, missions, lock, reporter, client)
+    finally:
+        if client is not None:
+            client.close()
+    exit_code = 1 if any(o.status == FAILED for o in outcomes) else 0
+    return BatchResult(outcomes, exit_code, table)
+
+
+def _run_locked(
+    options: BatchOptions, missions: list[Mission], lock: BatchLock, reporter: Reporter, client: Any
+) -> tuple[list[FloatOutcome], str]:
+    """Everything done while holding OUT's lock: clean, plan, run, write the reports."""
+    from ..io.atomic import write_text_atomic
+
+    started = time.monotonic()
+    out = options.out
+    reporter.log(
+        f"rafostrack {__version__}, pid {os.getpid()} on {socket.gethostname()}; "
+        f"roots: {' '.join(map(str, options.roots))}; out: {out}",
+        console=False,
+    )
+    clean_stale(out, missions, reporter.log)
+    for mission in missions:
+        if mission.orphans:
+            names = ", ".join(f"{f}.csv" for f in mission.orphans)
+            reporter.log(f"{mission.name}: ignoring {names} (no row in floats.csv)", console=False)
+    tasks, known = plan(
+        missions,
+        out,
+        config_files=options.config_files,
+        overrides=options.overrides,
+        plots=options.plots,
+        force=options.force,
+        run_id=lock.run_id,
+    )
+    skipped = sum(o.status == SKIPPED for o in known)
+    if client is not None:
+        where = f"on Dask scheduler {options.scheduler}"
+    else:
+        where = f"with {min(options.jobs, max(len(tasks), 1))} local worker process(es)"
+    reporter.log(
+        f"{len(tasks) + len(known)} floats in {len(missions)} mission(s): {len(tasks)} to process {where}, "
+        f"{skipped} skipped, {len(known) - skipped} failed before running"
+    )
+    for outcome in known:
+        line = f"{outcome.mission}/{outcome.float_id} {outcome.status}: {outcome.reason}"
+        reporter.log(line, console=outcome.status == FAILED)
+    reporter.start(len(tasks))
+    outcomes = list(known)
+    try:
+        if client is not None:
+            runner = run_dask(tasks, client)
+        else:
+            runner = run_local(tasks, options.jobs, on_stderr=lambda text: _log_worker_stderr(reporter, text, out))
+        for outcome in runner:
+            outcomes.append(outcome)
+            reporter.done(outcome)
+    finally:
+        reporter.finish()
+    outcomes.sort(key=lambda o: (o.mission, o.float_id))
+    table = summary_table(outcomes, time.monotonic() - started, out)
+    reporter.lines.extend(table.splitlines())
+    write_text_atomic(out / SUMMARY_NAME, summary_csv(outcomes))
+    write_text_atomic(out / LOG_NAME, "\n".join(reporter.lines) + "\n")
+    return outcomes, table
+
+
+def _log_worker_stderr(reporter: Reporter, text: str, out: Path) -> None:
+    """What the local workers wrote on stderr goes to batch.log, with a line saying so."""
+    lines = text.rstrip("\n").splitlines()
+    reporter.log(f"the local worker processes wrote {len(lines)} line(s) on stderr, kept in {Path(out) / LOG_NAME}")
+    reporter.lines.extend(f"  worker stderr: {line}" for line in lines)
+
+
+def clean_stale(out: Path, missions: Iterable[Mission], log: Callable[[str], None]) -> None:
+    """Remove temporary directories and files that a killed run left in OUT (under the lock,
+    so no other batch run is writing there)."""
+    places = [Path(out)] + [Path(out) / m.name for m in missions]
+    for place in dict.fromkeys(places):
+        try:
+            entries = list(os.scandir(place))
+        except OSError:
+            continue
+        for entry in entries:
+            if entry.is_dir(follow_symlinks=False) and _STALE_DIR.match(entry.name):
+                shutil.rmtree(entry.path, ignore_errors=True)
+                log(f"removed {entry.path} (left by an interrupted run)")
+            elif entry.is_file(follow_symlinks=False) and _STALE_FILE.match(entry.name):
+                Path(entry.path).unlink(missing_ok=True)
+                log(f"removed {entry.path} (left by an interrupted run)")
