@@ -19,10 +19,10 @@ import numpy as np
 
 from rafostrack.config import METHODS, load_config, method_overrides, with_overrides
 from rafostrack.evaluate import association_accuracy, inside_ellipse, position_errors_km
+from rafostrack.method import track_record
 from rafostrack.posterior import ELLIPSE_95_SCALE
 from rafostrack.scenarios import synthetic_scenario
 from rafostrack.simulate import simulate_mission
-from rafostrack.tracker import track_record
 
 CLUTTER_RATES = (0.5, 1.0, 2.0, 4.0)
 

@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 
 from rafostrack.config import method_overrides, with_overrides
+from rafostrack.method import track_record
 from rafostrack.pipeline import TrackInputs, load_float
-from rafostrack.tracker import track_record
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data" / "samples" / "float767.csv"
 

@@ -101,6 +101,15 @@ class RecoveryConfig:
     search_radius_km: float = setting("> 0", _positive)
     reseed_fraction: float = setting("in (0, 0.9]", lambda v: 0 < v <= 0.9)
     check_every: int = setting(">= 1", lambda v: v >= 1)
+    backward_pass: bool = setting()
+    guide_fraction: float = setting("in (0, 0.5]", lambda v: 0 < v <= 0.5)
+
+
+@dataclass(frozen=True)
+class CalibrateConfig:
+    """Estimate the record's nuisances from a first pass (`rafostrack.calibrate`)."""
+
+    enabled: bool = setting()
 
 
 @dataclass(frozen=True)
@@ -151,6 +160,7 @@ class Config:
     model: ModelConfig
     motion: MotionConfig
     recovery: RecoveryConfig
+    calibrate: CalibrateConfig
     fixes: FixesConfig
     filter: FilterConfig
     smoother: SmootherConfig
@@ -335,6 +345,16 @@ def load_config(
     if overrides:
         layers = merge_layer(layers, overrides, "command line")
     return _build(layers)
+
+
+def explicit_keys(
+    files: list[Path] | tuple[Path, ...] = (), overrides: dict[str, dict[str, Any]] | None = None
+) -> set[tuple[str, str]]:
+    """The (section, key) pairs that a config file or the command line sets (not the defaults)."""
+    keys: set[tuple[str, str]] = set()
+    for layer in [*(_read_toml(Path(path)) for path in files), overrides or {}]:
+        keys |= {(s, k) for s, values in layer.items() if isinstance(values, dict) for k in values}
+    return keys
 
 
 def with_overrides(config: Config, **sections: dict[str, Any]) -> Config:

@@ -38,6 +38,12 @@ class BeaconTable:
     drift_s_per_day: NDArray[np.float64]
     start: NDArray[np.datetime64]
     end: NDArray[np.datetime64]
+    # Per-beacon model values (NaN, or None for all, = the configuration's): effective
+    # sound speed along the beacon's paths, peak detection probability, and the range at
+    # which it has halved (see `model.detection_prob`). Set by calibration.
+    sound_speed_m_s: NDArray[np.float64] | None = None
+    p_detect: NDArray[np.float64] | None = None
+    detection_range_km: NDArray[np.float64] | None = None
 
     def __len__(self) -> int:
         return len(self.beacon_id)
@@ -67,13 +73,25 @@ class FloatInfo:
     clock_offset_end_s: float
     window_s: float
     max_signals: int
+    # A smooth correction to the linear clock model (knot times, seconds), interpolated
+    # linearly; estimated by calibration from the arrival times themselves.
+    clock_residual: tuple[NDArray[np.datetime64], NDArray[np.float64]] | None = None
 
     def clock_offset_s(self, time: NDArray[np.datetime64] | np.datetime64) -> NDArray[np.float64]:
-        """Float clock error (float clock minus true time), linear from launch to end."""
+        """Float clock error (float clock minus true time): linear from launch to end, plus
+        the calibrated residual when there is one."""
         if np.isnat(self.end_time) or self.end_time <= self.launch_time:
-            return np.full(np.shape(time), self.clock_offset_start_s)
-        frac = (time - self.launch_time) / (self.end_time - self.launch_time)
-        return np.asarray(self.clock_offset_start_s + frac * (self.clock_offset_end_s - self.clock_offset_start_s))
+            linear = np.full(np.shape(time), self.clock_offset_start_s)
+        else:
+            frac = (time - self.launch_time) / (self.end_time - self.launch_time)
+            linear = np.asarray(
+                self.clock_offset_start_s + frac * (self.clock_offset_end_s - self.clock_offset_start_s)
+            )
+        if self.clock_residual is None:
+            return linear
+        knots, seconds = self.clock_residual
+        at = np.asarray(time, dtype="datetime64[ns]").astype(np.int64).astype(float)
+        return linear + np.interp(at, knots.astype("datetime64[ns]").astype(np.int64).astype(float), seconds)
 
     @property
     def has_end_fix(self) -> bool:
@@ -132,6 +150,11 @@ class Particles:
         """The particles at `index` (e.g. resampled ancestors), copied."""
         vel = None if self.velocity_km_per_day is None else self.velocity_km_per_day[index]
         return Particles(self.lat[index], self.lon[index], vel)
+
+    def reversed(self) -> Particles:
+        """The same positions with velocities negated (for a filter run backwards in time)."""
+        vel = None if self.velocity_km_per_day is None else -self.velocity_km_per_day
+        return Particles(self.lat, self.lon, vel)
 
     def replace_at(self, index: NDArray[np.intp], other: Particles) -> Particles:
         """A copy with the particles at `index` replaced by `other` (same length as `index`)."""

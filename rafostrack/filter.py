@@ -141,7 +141,7 @@ class ParticleFilter:
         if self.recovery is not None:
             monitor = RecoveryMonitor(self.recovery, self.arrivals, self.motion)
         for obs in events:
-            dt_days = days_between(t_prev, obs.time)
+            dt_days = abs(days_between(t_prev, obs.time))  # a backward run goes back in time
             prior_weights, log_prior = normalise_log_weights(log_w)
             moved = self.motion.propagate(particles, dt_days, rng)
             evidence = self._evaluate(moved, obs)

@@ -51,6 +51,9 @@ class WindowBeacons:
     lat: NDArray[np.float64]
     lon: NDArray[np.float64]
     delay_s: NDArray[np.float64]  # offset + drift * days + float clock offset
+    sound_speed_m_s: NDArray[np.float64] | None = None  # per beacon (NaN: the model's)
+    p_detect: NDArray[np.float64] | None = None
+    detection_range_km: NDArray[np.float64] | None = None
 
 
 def window_beacons(
@@ -67,7 +70,16 @@ def window_beacons(
     epoch = np.where(np.isnat(beacons.start[index]), info.launch_time, beacons.start[index])
     days = elapsed_days(np.asarray(time), epoch)
     delay = beacons.offset_s[index] + beacons.drift_s_per_day[index] * days + info.clock_offset_s(time)
-    return WindowBeacons(index, beacons.lat[index], beacons.lon[index], delay)
+    per_beacon = [
+        None if values is None else values[index]
+        for values in (beacons.sound_speed_m_s, beacons.p_detect, beacons.detection_range_km)
+    ]
+    return WindowBeacons(index, beacons.lat[index], beacons.lon[index], delay, *per_beacon)
+
+
+def _per_beacon(values: NDArray | None, default: float) -> NDArray | float:
+    """Per-beacon values with NaN (or all, when None) replaced by the model's `default`."""
+    return default if values is None else np.where(np.isnan(values), default, values)
 
 
 def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np.float64]:
@@ -76,16 +88,21 @@ def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np
 
 
 def predicted_toa_s(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
-    """Predicted arrival times mu_i = delay_i + range_i / c, shape (P, s)."""
-    return wb.delay_s[None, :] + ranges_m / model.sound_speed_m_s
+    """Predicted arrival times mu_i = delay_i + range_i / c_i, shape (P, s) (c_i the beacon's
+    sound speed where calibrated, else the model's)."""
+    return wb.delay_s[None, :] + ranges_m / _per_beacon(wb.sound_speed_m_s, model.sound_speed_m_s)
 
 
-def detection_prob(ranges_m: NDArray, model: ModelConfig) -> NDArray[np.float64]:
-    """Pd as a function of range: p_detect, times a logistic fall-off when range-limited."""
-    if model.detection_range_km <= 0:
-        return np.full(ranges_m.shape, model.p_detect)
-    z = (ranges_m / 1e3 - model.detection_range_km) / model.detection_falloff_km
-    return model.p_detect * 0.5 * (1.0 - np.tanh(0.5 * z))  # p / (1 + e^z), overflow-free
+def detection_prob(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
+    """Pd as a function of range: p_i / (1 + exp((range - R_i) / w)), the peak probability
+    p_i and half range R_i per beacon where calibrated, else the model's (R = 0: no fall-off)."""
+    p = _per_beacon(wb.p_detect, model.p_detect)
+    r50 = _per_beacon(wb.detection_range_km, model.detection_range_km)
+    if np.all(np.asarray(r50) <= 0):
+        return np.broadcast_to(p, ranges_m.shape) * np.ones(ranges_m.shape)
+    z = (ranges_m / 1e3 - r50) / model.detection_falloff_km
+    falloff = np.where(np.asarray(r50) > 0, 0.5 * (1.0 - np.tanh(0.5 * z)), 1.0)  # 1 / (1 + e^z), overflow-free
+    return p * falloff
 
 
 def toa_logpdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:

@@ -15,13 +15,14 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .config import Config, load_config
+from .config import Config, explicit_keys, load_config
 from .domain import ArrivalRecord, BeaconTable, FloatInfo
 from .errors import InputError, Warnings, nearest
 from .io import read_arrivals, read_beacons, read_floats
 from .io.outdir import check_output_dir
 from .io.writers import file_digest, write_json, write_parquet
-from .tracker import TrackOutput, track_record
+from .method import track_record
+from .tracker import TrackOutput
 
 MISSION_CONFIG = "rafostrack.toml"
 EARLIEST_TIME = np.datetime64("1678-01-01T00:00", "ns")  # the readers' earliest accepted time
@@ -67,6 +68,7 @@ class LoadedFloat:
     info: FloatInfo
     record: ArrivalRecord
     warnings: Warnings
+    explicit: frozenset[tuple[str, str]] = frozenset()  # config keys the user set (not estimated)
 
 
 def load_float(inputs: TrackInputs) -> LoadedFloat:
@@ -86,7 +88,8 @@ def load_float(inputs: TrackInputs) -> LoadedFloat:
         record = read_arrivals(inputs.float_path, info, beacons, warnings)
     if config.filter.likelihood == "labeled" and not record.has_labels:
         raise InputError(f"{inputs.float_path}: likelihood 'labeled' needs a 'beacon_id' column of known labels")
-    return LoadedFloat(config, beacons, info, record, warnings)
+    explicit = frozenset(explicit_keys(inputs.config_layers(), inputs.overrides))
+    return LoadedFloat(config, beacons, info, record, warnings, explicit)
 
 
 def _float_info(floats_path: Path, inputs: TrackInputs, config: Config) -> FloatInfo:
@@ -142,7 +145,9 @@ def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also
     check_output_dir(Path(out_root))
     loaded = load_float(inputs)
     config = loaded.config
-    output = track_record(loaded.beacons, loaded.info, config, loaded.record, also_filtered=also_filtered)
+    output = track_record(
+        loaded.beacons, loaded.info, config, loaded.record, also_filtered=also_filtered, explicit=loaded.explicit
+    )
     elapsed = time.perf_counter() - started
 
     out_dir = Path(out_root) / loaded.info.float_id
@@ -190,6 +195,8 @@ def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, el
         "runtime_s": round(elapsed_s, 3),
         "filter_s": round(output.filter_s, 3),
         "smoother_s": round(output.smoother_s, 3),
+        "calibrate_s": round(output.calibrate_s, 3),
+        "calibration": output.calibration,
         "counts": {
             "windows": len(output.track),
             "toas": len(labels),

@@ -214,7 +214,7 @@ def simulate_arrivals(
         wb = window_beacons(beacons, info, t)
         ranges = beacon_ranges_m(lat_all[k : k + 1], lon_all[k : k + 1], wb)
         mu = predicted_toa_s(ranges, wb, model)[0]
-        pd_i = detection_prob(ranges, model)[0]
+        pd_i = detection_prob(ranges, wb, model)[0]
         s = len(wb.index)
         u_det = rng.random(s)
         err = model.toa_sigma_s * rng.standard_normal(s)

@@ -9,8 +9,10 @@ benchmarks and experiments call it directly.
 from __future__ import annotations
 
 import time
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -18,7 +20,7 @@ import pandas as pd
 from .config import AmbiguityConfig, Config
 from .domain import ArrivalRecord, BeaconTable, FloatInfo, PositionFix
 from .estimates import Estimate, EstimateBuilder, build_estimate
-from .filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
+from .filter import FilterResult, FilterSettings, Guide, ParticleFilter, Step, float_rng, observations
 from .likelihoods import ArrivalLikelihood, PositionFixLikelihood, arrivals_from_config
 from .motion import JumpMixture, MotionModel, motion_from_config
 from .recovery import RecoverySettings
@@ -34,6 +36,8 @@ class TrackOutput:
     warnings: list[str]  # recoverable problems met while filtering
     filter_s: float
     smoother_s: float
+    calibration: dict[str, Any] | None = None  # what the first pass estimated (`rafostrack.calibrate`)
+    calibrate_s: float = 0.0  # the first pass and the estimation
 
     @property
     def track(self) -> pd.DataFrame:
@@ -104,19 +108,39 @@ class Tracker:
         label_probs: bool = True,
         keep: bool = True,
         on_step: Callable[[Step], None] | None = None,
+        guide: Guide | None = None,
     ) -> FilterResult:
         """The forward filter over the record (and the end fix), with the float's own
-        generator; see `ParticleFilter.run` for `keep` and `on_step`."""
+        generator; see `ParticleFilter.run` for `keep` and `on_step`, and `guide` for its
+        proposals."""
         info = self.info
         fixes = PositionFixLikelihood(info.float_id)
         pf = ParticleFilter(
-            self.motion, self.arrivals, fixes, self.settings, label_probs=label_probs, recovery=self.recovery
+            self.motion,
+            self.arrivals,
+            fixes,
+            self.settings,
+            label_probs=label_probs,
+            recovery=self.recovery,
+            guide=guide,
         )
         launch = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
         events = observations(record.windows, self.end_fix)
         return pf.run(launch, events, float_rng(self.seed, info.float_id), keep=keep, on_step=on_step)
 
-    def track(self, record: ArrivalRecord, *, also_filtered: bool = False) -> TrackOutput:
+    def run_backward(self, record: ArrivalRecord, start: PositionFix) -> FilterResult:
+        """The filter run backwards in time from `start` (the recovery fix, or a broad guess
+        at the last window) over the windows, latest first, with the reversed drift model;
+        its velocities are those of the reversed motion (`MotionModel.reversed`)."""
+        info = self.info
+        fixes = PositionFixLikelihood(info.float_id)
+        pf = ParticleFilter(
+            self.motion.reversed(), self.arrivals, fixes, self.settings, label_probs=False, recovery=self.recovery
+        )
+        rng = np.random.default_rng([self.seed, zlib.crc32(info.float_id.encode("utf-8")), 1])
+        return pf.run(start, list(reversed(record.windows)), rng)
+
+    def track(self, record: ArrivalRecord, *, also_filtered: bool = False, guide: Guide | None = None) -> TrackOutput:
         """Filter the record, then smooth if configured, and summarise.
 
         Without smoothing, each step is summarised as the filter makes it and then dropped,
@@ -126,11 +150,11 @@ class Tracker:
         started = time.perf_counter()
         if not self.smooth:
             builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered")
-            run = self.run_filter(record, keep=False, on_step=builder.add)
+            run = self.run_filter(record, keep=False, on_step=builder.add, guide=guide)
             estimate = builder.result()
             return TrackOutput(estimate, estimate, run.n_resamples, run.warnings, time.perf_counter() - started, 0.0)
 
-        run = self.run_filter(record, label_probs=also_filtered)
+        run = self.run_filter(record, label_probs=also_filtered, guide=guide)
         filter_s = time.perf_counter() - started
         filtered = build_estimate(float_id, run.steps, self.beacon_ids, self.ambiguity) if also_filtered else None
 
@@ -140,10 +164,3 @@ class Tracker:
             float_id, run.steps, self.beacon_ids, self.ambiguity, weights, self.arrivals.label_probs
         )
         return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, time.perf_counter() - started)
-
-
-def track_record(
-    beacons: BeaconTable, info: FloatInfo, config: Config, record: ArrivalRecord, *, also_filtered: bool = False
-) -> TrackOutput:
-    """Track one float's record with the configured method (`Tracker.from_config(...).track`)."""
-    return Tracker.from_config(config, beacons, info).track(record, also_filtered=also_filtered)

@@ -6,10 +6,11 @@ import numpy as np
 
 from rafostrack.config import load_config, with_overrides
 from rafostrack.likelihoods import RankedArrivals
+from rafostrack.method import track_record
 from rafostrack.posterior import summarise
 from rafostrack.scenarios import synthetic_scenario
 from rafostrack.simulate import simulate_mission
-from rafostrack.tracker import Tracker, track_record
+from rafostrack.tracker import Tracker
 
 
 def test_end_fix_is_the_last_step_and_pulls_the_cloud(sim_mission):

@@ -14,7 +14,7 @@ from rafostrack.domain import Particles
 from rafostrack.engines import exact
 from rafostrack.evaluate import position_errors_km
 from rafostrack.likelihoods import RankedArrivals, fix_loglik
-from rafostrack.tracker import track_record
+from rafostrack.method import track_record
 
 
 def test_fix_loglik_is_a_normalised_2d_gaussian():
@@ -40,7 +40,7 @@ def test_ranked_component_is_the_model_factors_summed_by_the_engine(sim_mission,
     ranges = m.beacon_ranges_m(lat, lon, wb)
     f = m.association_factors(
         m.predicted_toa_s(ranges, wb, model),
-        m.detection_prob(ranges, model),
+        m.detection_prob(ranges, wb, model),
         window.toa_s,
         max_signals=sim.info.max_signals,
         window_s=sim.info.window_s,

@@ -122,13 +122,28 @@ def test_predicted_arrival_by_hand():
     assert len(m.window_beacons(beacons, info, np.datetime64("2008-12-31", "ns")).index) == 0
 
 
+def _wb(n: int, **per_beacon) -> m.WindowBeacons:
+    return m.WindowBeacons(np.arange(n), np.zeros(n), np.zeros(n), np.zeros(n), **per_beacon)
+
+
 def test_detection_falls_off_with_range():
     model = _model(p_detect=0.9, detection_range_km=1000.0, detection_falloff_km=50.0)
-    pd_ = m.detection_prob(np.array([0.0, 1000e3, 2000e3]), model)
+    pd_ = m.detection_prob(np.array([[0.0, 1000e3, 2000e3]]), _wb(3), model)[0]
     assert pd_[0] == pytest.approx(0.9, rel=1e-6)
     assert pd_[1] == pytest.approx(0.45)
     assert pd_[2] < 1e-6
-    assert np.all(m.detection_prob(np.array([5e6]), _model(p_detect=0.9)) == 0.9)
+    assert np.all(m.detection_prob(np.array([[5e6]]), _wb(1), _model(p_detect=0.9)) == 0.9)
+
+
+def test_per_beacon_detection_and_sound_speed_override_the_model():
+    """Calibrated per-beacon values replace the model's; NaN keeps the model's."""
+    model = _model(p_detect=0.9, detection_range_km=1000.0, detection_falloff_km=50.0, sound_speed_m_s=1480.0)
+    wb = _wb(2, p_detect=np.array([0.5, np.nan]), detection_range_km=np.array([np.nan, 600.0]),
+             sound_speed_m_s=np.array([1500.0, np.nan]))  # fmt: skip
+    pd_ = m.detection_prob(np.array([[1000e3, 600e3]]), wb, model)[0]
+    assert pd_ == pytest.approx([0.25, 0.45])
+    mu = m.predicted_toa_s(np.array([[1500e3, 1480e3]]), wb, model)[0]
+    assert mu == pytest.approx([1000.0, 1000.0])
 
 
 def test_labeled_loglik_ignores_clutter_labels():

@@ -12,13 +12,13 @@ from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import BeaconTable, Cloud, FloatInfo, Particles
 from rafostrack.evaluate import inside_ellipse, position_errors_km, true_labels
 from rafostrack.geodesy import displace, local_offsets_km, range_m
+from rafostrack.method import track_record
 from rafostrack.motion import MOTION_MODELS, IntegratedOU, RandomWalk
 from rafostrack.posterior import ELLIPSE_95_SCALE, summarise
 from rafostrack.resampling import normalise_log_weights, systematic
 from rafostrack.scenarios import synthetic_scenario
 from rafostrack.simulate import simulate_arrivals, simulate_mission
 from rafostrack.smoother import smooth
-from rafostrack.tracker import track_record
 
 LAT0, LON0 = -58.0, -90.0
 T0 = np.datetime64("2010-01-01T00:00", "ns")

@@ -10,9 +10,10 @@ from rafostrack.config import METHODS, load_config, method_overrides, with_overr
 from rafostrack.engines import ENGINES
 from rafostrack.evaluate import association_accuracy, position_errors_km
 from rafostrack.likelihoods import ARRIVAL_LIKELIHOODS
+from rafostrack.method import track_record
 from rafostrack.motion import MOTION_MODELS
 from rafostrack.resampling import RESAMPLERS
-from rafostrack.tracker import Tracker, track_record
+from rafostrack.tracker import Tracker
 
 
 def _run(mission, method, particles=500, seed=0):

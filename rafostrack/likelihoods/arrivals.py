@@ -80,7 +80,7 @@ class RankedArrivals(ArrivalLikelihood):
         ranges = m.beacon_ranges_m(particles.lat, particles.lon, wb)
         factors = m.association_factors(
             m.predicted_toa_s(ranges, wb, self.model),
-            m.detection_prob(ranges, self.model),
+            m.detection_prob(ranges, wb, self.model),
             window.toa_s,
             max_signals=self.info.max_signals,
             window_s=self.info.window_s,

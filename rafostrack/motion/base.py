@@ -81,6 +81,12 @@ class MotionModel(ABC):
         """The model with the `[motion]` settings it uses."""
 
     @abstractmethod
+    def reversed(self) -> MotionModel:
+        """The model of the same drift run backwards in time: a float filtered from its end
+        towards its launch moves with the velocity negated and against the mean current
+        (for a stationary velocity process, its time reversal is the same process)."""
+
+    @abstractmethod
     def transition(self, dt_days: float) -> LinearGaussian:
         """A(dt), b(dt) and the noise factor L(dt) of the exact transition over `dt_days` (>= 0)."""
 
@@ -179,6 +185,9 @@ class JumpMixture(MotionModel):
     def transition(self, dt_days: float) -> LinearGaussian:
         """The base model's transition (the component without a jump)."""
         return self.base.transition(dt_days)
+
+    def reversed(self) -> MotionModel:
+        return JumpMixture(self.base.reversed(), self.jump_rate_per_day, self.jump_sd_km)
 
     def stationary_velocity(self) -> tuple[NDArray[np.float64], float]:
         return self.base.stationary_velocity()

@@ -23,6 +23,7 @@ says, and a float carried by a current keeps being carried while it is not heard
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -75,6 +76,10 @@ class IntegratedOU(MotionModel):
 
     def stationary_velocity(self) -> tuple[NDArray[np.float64], float]:
         return np.asarray(self.mean_current_km_per_day, dtype=float), self.velocity_sd_km_per_day
+
+    def reversed(self) -> MotionModel:
+        east, north = self.mean_current_km_per_day
+        return dataclasses.replace(self, mean_current_km_per_day=(-east, -north))
 
     def transition(self, dt_days: float) -> LinearGaussian:
         """State (east, north, v_east, v_north); the Cholesky factor per axis in closed form."""

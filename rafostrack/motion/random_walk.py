@@ -9,6 +9,7 @@ spread after a gap of k days is D sqrt(k) per axis whatever the float was doing 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,6 +31,10 @@ class RandomWalk(MotionModel):
     @classmethod
     def from_config(cls, cfg: MotionConfig) -> RandomWalk:
         return cls(cfg.diffusion_km_per_day, (cfg.mean_current_east_km_per_day, cfg.mean_current_north_km_per_day))
+
+    def reversed(self) -> MotionModel:
+        east, north = self.mean_current_km_per_day
+        return dataclasses.replace(self, mean_current_km_per_day=(-east, -north))
 
     def transition(self, dt_days: float) -> LinearGaussian:
         sd = self.diffusion_km_per_day * np.sqrt(max(dt_days, 0.0))

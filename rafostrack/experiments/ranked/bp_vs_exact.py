@@ -67,7 +67,7 @@ def _level(task: tuple[float, int, int, int]) -> list[dict[str, Any]]:
         ranges = m.beacon_ranges_m(lat, lon, wb)
         f = m.association_factors(
             m.predicted_toa_s(ranges, wb, model),
-            m.detection_prob(ranges, model),
+            m.detection_prob(ranges, wb, model),
             window.toa_s,
             max_signals=info.max_signals,
             window_s=info.window_s,

@@ -22,9 +22,10 @@ import pandas as pd
 from ...config import method_overrides, with_overrides
 from ...domain import ArrivalRecord
 from ...evaluate import association_accuracy, position_errors_km
+from ...method import track_record
 from ...pipeline import TrackInputs, load_float
 from ...plots import date_axis, save_png
-from ...tracker import TrackOutput, track_record
+from ...tracker import TrackOutput
 from ..common import DEFAULT_WORKERS, experiment, figure, pmap, save_csv
 from .setting import ONE_DAY, SAMPLES
 

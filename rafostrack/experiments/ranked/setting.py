@@ -26,9 +26,10 @@ from ...config import Config, load_config, method_overrides, with_overrides
 from ...domain import ArrivalRecord, BeaconTable, FloatInfo
 from ...evaluate import position_errors_km
 from ...geodesy import displace, local_offsets_km
+from ...method import track_record
 from ...scenarios import sample_mission_dir
 from ...simulate import simulate_arrivals
-from ...tracker import TrackOutput, track_record
+from ...tracker import TrackOutput
 
 T0 = np.datetime64("2010-01-01T00:00:00", "ns")
 
