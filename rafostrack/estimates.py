@@ -82,6 +82,7 @@ class EstimateBuilder:
         self.ambiguity = ambiguity
         self.kind = kind
         self._track: list[tuple] = []
+        self.window_ess: list[float] = []  # the filter's ESS of each window added
         self._labels: list[tuple] = []
         self._modes: list[tuple] = []
 
@@ -102,6 +103,7 @@ class EstimateBuilder:
             min_separation_km=amb.min_separation_km,
             separation_factor=amb.separation_factor,
         )
+        self.window_ess.append(step.ess)
         position = modes.first if modes.ambiguous else modes.whole
         smaj, smin, angle = position.ellipse()
         self._track.append(

@@ -197,14 +197,30 @@ def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, el
         "smoother_s": round(output.smoother_s, 3),
         "calibrate_s": round(output.calibrate_s, 3),
         "calibration": output.calibration,
+        "ess": _ess_summary(np.array(output.filter_ess), loaded.config.filter.particles),
         "counts": {
             "windows": len(output.track),
             "toas": len(labels),
             "labelled_beacon": int(labels["beacon_id"].notna().sum()),
             "labelled_clutter": int(labels["beacon_id"].isna().sum()),
             "resamples": output.n_resamples,
+            "recovery_checks": output.n_checks,
+            "recovery_reseeds": output.n_reseeds,
             "ambiguous_windows": int(output.track["ambiguous"].sum()),
             "warnings": len(loaded.warnings) + len(output.warnings),
         },
         "warnings": [*loaded.warnings.messages, *output.warnings],
+    }
+
+
+def _ess_summary(ess: np.ndarray, particles: int) -> dict[str, float]:
+    """The filter's effective sample size over the windows: median, 10th percentile, minimum,
+    and the median as a fraction of the particles."""
+    if len(ess) == 0:
+        return {}
+    return {
+        "median": round(float(np.median(ess)), 1),
+        "p10": round(float(np.percentile(ess, 10)), 1),
+        "min": round(float(ess.min()), 1),
+        "median_fraction": round(float(np.median(ess)) / particles, 3),
     }

@@ -38,6 +38,9 @@ class TrackOutput:
     smoother_s: float
     calibration: dict[str, Any] | None = None  # what the first pass estimated (`rafostrack.calibrate`)
     calibrate_s: float = 0.0  # the first pass and the estimation
+    filter_ess: tuple[float, ...] = ()  # the filter's effective sample size at each window
+    n_checks: int = 0  # windows the recovery monitor searched
+    n_reseeds: int = 0  # windows where it re-seeded part of the cloud
 
     @property
     def track(self) -> pd.DataFrame:
@@ -59,7 +62,7 @@ def _motion(config: Config) -> MotionModel:
 
 def _recovery(config: Config) -> RecoverySettings | None:
     rec = config.recovery
-    if not rec.enabled or config.filter.likelihood == "labeled":  # known labels need no search
+    if not rec.enabled:
         return None
     return RecoverySettings(
         search_radius_km=rec.search_radius_km, fraction=rec.reseed_fraction, check_every=rec.check_every
@@ -152,7 +155,8 @@ class Tracker:
             builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered")
             run = self.run_filter(record, keep=False, on_step=builder.add, guide=guide)
             estimate = builder.result()
-            return TrackOutput(estimate, estimate, run.n_resamples, run.warnings, time.perf_counter() - started, 0.0)
+            elapsed = time.perf_counter() - started
+            return TrackOutput(estimate, estimate, run.n_resamples, run.warnings, elapsed, 0.0, **_counts(run, builder))
 
         run = self.run_filter(record, label_probs=also_filtered, guide=guide)
         filter_s = time.perf_counter() - started
@@ -163,4 +167,12 @@ class Tracker:
         estimate = build_estimate(
             float_id, run.steps, self.beacon_ids, self.ambiguity, weights, self.arrivals.label_probs
         )
-        return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, time.perf_counter() - started)
+        smoother_s = time.perf_counter() - started
+        return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s, **_counts(run))
+
+
+def _counts(run: FilterResult, builder: EstimateBuilder | None = None) -> dict[str, Any]:
+    """What a filter run counted, for `TrackOutput` (ESS per window from the builder when the
+    run kept no steps)."""
+    ess = builder.window_ess if builder is not None else tuple(s.ess for s in run.steps if s.window is not None)
+    return {"filter_ess": tuple(ess), "n_checks": run.n_checks, "n_reseeds": run.n_reseeds}

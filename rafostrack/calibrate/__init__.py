@@ -175,7 +175,7 @@ def calibrate(
     arrivals = _confident_arrivals(estimate, beacons, info, config)
     if arrivals is None:
         return None
-    fit, noise = fit_timing(arrivals, beacons, info, model)
+    fit, noise = fit_timing(arrivals, beacons, info, model, fix_sound_speed=("model", "sound_speed_m_s") in explicit)
     sigma, eps, tau = noise.toa_sigma_s, noise.multipath_fraction, noise.multipath_delay_s
     clutter = fit_clutter_rate(estimate.labels["p_clutter"].to_numpy(dtype=float), record, info)
     values: dict[tuple[str, str], float] = {
@@ -185,7 +185,7 @@ def calibrate(
         ("model", "multipath_delay_s"): round(tau, 2),
         ("model", "clutter_rate"): round(max(clutter, 0.05), 3),
     }
-    drift = fit_drift(estimate.track)
+    drift = fit_drift(fit.track)  # the fitted track: smooth, and corrected for the timing errors
     if drift is not None:
         mean, sd, timescale = drift
         values |= {

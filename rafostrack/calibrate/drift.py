@@ -10,7 +10,8 @@ mean current is removed, has per-axis variance
 to which position errors of sd e add 2 e^2 / k^2. The mean current is the track's overall
 displacement over its duration; (sigma, T, e) are fitted to the empirical V(k) of the
 first-pass track for k = 1..20 days (least squares on log V, each k weighted by how many
-spans it has), sigma in [0.3, 40] km/day, T in [0.5, 60] days.
+spans it has), sigma in [1, 20] km/day, T in [2, 30] days (a shorter time scale cannot be told
+from position errors by daily positions).
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ def fit_drift(track: pd.DataFrame) -> tuple[NDArray[np.float64], float, float] |
         return weight * (np.log(model) - np.log(var))
 
     fit = least_squares(
-        residual, np.log([np.sqrt(var[0]), 5.0, 1.0]), bounds=(np.log([0.3, 0.5, 0.01]), np.log([40.0, 60.0, 20.0]))
+        residual, np.log([np.sqrt(var[0]), 5.0, 1.0]), bounds=(np.log([1.0, 2.0, 0.01]), np.log([20.0, 30.0, 20.0]))
     )
     sigma, timescale, _ = np.exp(fit.x)
     return mean, float(sigma), float(timescale)

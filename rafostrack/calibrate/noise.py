@@ -26,7 +26,7 @@ from ..model import horizon_s, toa_logpdf
 
 def fit_toa_noise(residual_s: NDArray, model: ModelConfig) -> tuple[float, float, float]:
     """(sigma, eps, tau) maximising sum log f(r) over the residuals, started from the model's
-    values; eps in [1e-4, 0.5], sigma in [0.2, 20] s, tau in [8, 200] s (a delay shorter than a few
+    values; eps in [1e-4, 0.3], sigma in [0.2, 20] s, tau in [8, 200] s (a delay shorter than a few
     sigma would be indistinguishable from the Gaussian core, and take part of it)."""
     r = np.asarray(residual_s, dtype=float)
 
@@ -34,7 +34,7 @@ def fit_toa_noise(residual_s: NDArray, model: ModelConfig) -> tuple[float, float
         return dataclasses.replace(
             model,
             toa_sigma_s=float(np.clip(np.exp(p[0]), 0.2, 20.0)),
-            multipath_fraction=float(np.clip(expit(p[1]), 1e-4, 0.5)),
+            multipath_fraction=float(np.clip(expit(p[1]), 1e-4, 0.3)),
             multipath_delay_s=float(np.clip(np.exp(p[2]), 8.0, 200.0)),
         )
 

@@ -27,6 +27,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 from scipy import sparse
 from scipy.sparse.linalg import splu
@@ -59,7 +60,7 @@ class TimingPriors:
     """Prior sds of the timing parameters (and the clock knots' spacing)."""
 
     sound_speed_m_s: float = 40.0  # of the shared effective sound speed
-    beacon_sound_speed_m_s: float = 4.0  # of a beacon's deviation from it
+    beacon_sound_speed_m_s: float = 2.0  # of a beacon's deviation from it
     offset_s: float = 1.5
     drift_s_per_day: float = 0.02
     clock_s: float = 3.0
@@ -82,6 +83,7 @@ class TimingFit:
     clock_s: NDArray[np.float64]
     residual_s: NDArray[np.float64]  # per arrival, after the fit
     heard: NDArray[np.bool_]  # per beacon row: any arrival used
+    track: pd.DataFrame  # time, lat, lon of the fitted (corrected, smooth) positions
 
 
 def _clock_basis(times: NDArray[np.datetime64], knots: NDArray[np.datetime64]) -> NDArray[np.float64]:
@@ -139,10 +141,11 @@ def fit_timing(
     model: ModelConfig,
     priors: TimingPriors = TimingPriors(),
     iterations: int = 5,
+    fix_sound_speed: bool = False,
 ) -> tuple[TimingFit, ModelConfig]:
     """Fit the timing parameters and window offsets (module docstring), and the TOA noise
     (sigma, multipath fraction and delay) with them; return the fit and `model` with the
-    fitted noise."""
+    fitted noise. `fix_sound_speed`: the shared sound speed is `model`'s, not fitted."""
     sound_speed_m_s = model.sound_speed_m_s
     s_beacons, n_win = len(beacons), len(arrivals.time)
     knots = _knots(info, arrivals.time, priors.knot_days)
@@ -162,6 +165,8 @@ def fit_timing(
     )
     prior_sd[g_clk] = prior_sd[g_clk + n_knots - 1] = priors.clock_end_s if info.has_end_fix else priors.clock_s
     prior_sd[g_clk] = priors.clock_end_s
+    if fix_sound_speed:  # estimated elsewhere (the record's likelihood): only per-beacon deviations here
+        prior_sd[g_ds] = 1e-12
     theta = np.zeros(n_g)
     dx = np.zeros((n_win, 2))
     w_idx, b_idx = arrivals.window, arrivals.beacon
@@ -197,10 +202,24 @@ def fit_timing(
     position_sd = np.repeat(
         np.where(arrivals.anchored, arrivals.sd_km, np.maximum(arrivals.sd_km, 0.5) * priors.position_sd_factor), 2
     )
+
+    def objective(noise: ModelConfig) -> float:
+        """The negative log posterior (up to a constant): arrivals under the error density,
+        the priors, the track's smoothness."""
+        residual = arrivals.toa_s - predicted()[0]
+        acc = plane_acc + smooth_coef @ dx.ravel()
+        return float(
+            -np.sum(toa_logpdf(residual, noise))
+            + 0.5 * np.sum((theta / prior_sd) ** 2)
+            + 0.5 * np.sum((dx.ravel() / position_sd) ** 2)
+            + 0.5 * np.sum((acc / smooth_sd) ** 2)
+        )
+
     for _ in range(iterations):
         mu, r, grad, slow = predicted()
         residual = arrivals.toa_s - mu
         model = _noise_model(residual, model)
+        before = objective(model)
         w = direct_probability(residual, model) / model.toa_sigma_s**2
         jx = sparse.csr_matrix(
             ((grad * slow[:, None]).ravel(), (np.repeat(obs, 2), (2 * w_idx[:, None] + np.arange(2)).ravel())),
@@ -225,9 +244,20 @@ def fit_timing(
         normal = sparse.bmat([[nxx, sparse.csr_matrix(nxg)], [sparse.csr_matrix(nxg.T), sparse.csr_matrix(ngg)]])
         solver = splu(normal.tocsc())
         step = solver.solve(np.concatenate([bx, bg]))
-        dx += step[:n_x].reshape(n_win, 2)
-        theta += step[n_x:]
+        # Damped: halve the Gauss-Newton step until the objective falls (the model is not
+        # linear in the positions far from the first pass).
+        for _ in range(6):
+            dx += step[:n_x].reshape(n_win, 2)
+            theta += step[n_x:]
+            if objective(model) <= before:
+                break
+            dx -= step[:n_x].reshape(n_win, 2)
+            theta -= step[n_x:]
+            step = 0.5 * step
+        else:
+            break
     residual = arrivals.toa_s - predicted()[0]
+    fitted_lat, fitted_lon = displace(arrivals.lat, arrivals.lon, dx[:, 0], dx[:, 1])
     heard = np.bincount(b_idx, minlength=s_beacons) > 0
     slowness = s0 + theta[g_ds] + np.where(heard, theta[g_dsi : g_dsi + s_beacons], 0.0)
     fit = TimingFit(
@@ -239,6 +269,7 @@ def fit_timing(
         clock_s=theta[g_clk:],
         residual_s=residual,
         heard=heard,
+        track=pd.DataFrame({"time": arrivals.time, "lat": fitted_lat, "lon": fitted_lon}),
     )
     # The fitted positions and parameters take up some of the residuals' spread: sigma from
     # the residuals alone is too small by sqrt((n - p) / n), p = tr(H) the effective number

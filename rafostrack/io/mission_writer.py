@@ -17,8 +17,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import pandas as pd
 
 from ..config import load_config, merge_layer
+from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from .atomic import write_text_atomic
 
 if TYPE_CHECKING:
@@ -102,14 +104,21 @@ def write_mission(mission: SimulatedMission, outdir: Path, config_overrides: dic
     toa_s), truth/<float_id>.csv (time, lat, lon) and rafostrack.toml ([model] as simulated,
     plus `config_overrides`, e.g. {"filter": {"particles": 2000}}).
     """
-    outdir = Path(outdir)
-    b = mission.beacons
+    config_text = mission_config_text(mission, config_overrides)  # validate before writing
+    write_mission_files(mission.beacons, [(sf.info, sf.record, sf.truth) for sf in mission.floats], Path(outdir))
+    write_text_atomic(Path(outdir) / "rafostrack.toml", config_text)
+
+
+def write_mission_files(
+    beacons: BeaconTable, floats: list[tuple[FloatInfo, ArrivalRecord, pd.DataFrame]], outdir: Path
+) -> None:
+    """beacons.csv, floats.csv, the arrival files and truth/<float_id>.csv (see
+    `write_mission`), for floats given as (info, record with true labels, truth track)."""
+    b = beacons
     for bid in b.beacon_id:
         _check_id("beacon_id", str(bid))
-    for sf in mission.floats:
-        _check_id("float_id", sf.info.float_id)
-    config_text = mission_config_text(mission, config_overrides)  # validate before writing
-
+    for info, _, _ in floats:
+        _check_id("float_id", info.float_id)
     beacon_rows = [
         [str(b.beacon_id[i]), _num(b.lat[i]), _num(b.lon[i]), _num(b.offset_s[i]), _iso(b.start[i]),
          _iso(b.end[i]), _num(b.drift_s_per_day[i])]
@@ -119,37 +128,33 @@ def write_mission(mission: SimulatedMission, outdir: Path, config_overrides: dic
         outdir / "beacons.csv",
         _csv(["beacon_id", "lat", "lon", "offset_s", "start", "end", "drift_s_per_day"], beacon_rows),
     )
-    float_rows = []
-    for sf in mission.floats:
-        f = sf.info
-        float_rows.append(
-            [f.float_id, _iso(f.launch_time), _num(f.launch_lat), _num(f.launch_lon), _iso(f.end_time),
-             _num(f.end_lat), _num(f.end_lon), _num(f.clock_offset_start_s), _num(f.clock_offset_end_s),
-             _num(f.window_s), str(int(f.max_signals))]
-        )  # fmt: skip
+    float_rows = [
+        [f.float_id, _iso(f.launch_time), _num(f.launch_lat), _num(f.launch_lon), _iso(f.end_time),
+         _num(f.end_lat), _num(f.end_lon), _num(f.clock_offset_start_s), _num(f.clock_offset_end_s),
+         _num(f.window_s), str(int(f.max_signals))]
+        for f, _, _ in floats
+    ]  # fmt: skip
     float_header = [
         "float_id", "launch_time", "launch_lat", "launch_lon", "end_time", "end_lat", "end_lon",
         "clock_offset_start_s", "clock_offset_end_s", "window_s", "max_signals",
     ]  # fmt: skip
     write_text_atomic(outdir / "floats.csv", _csv(float_header, float_rows))
-
-    for sf in mission.floats:
+    for info, record, truth in floats:
         rows = []
-        for w in sf.record.windows:
+        for w in record.windows:
             when = _iso(w.time)
             if w.n_signals == 0:
                 rows.append([when, "", ""])
             labels = w.beacon_id if w.beacon_id is not None else (None,) * w.n_signals
             rows += [[when, f"{t:.{_TOA_DECIMALS}f}", lab or ""] for t, lab in zip(w.toa_s, labels, strict=True)]
-        write_text_atomic(outdir / f"{sf.info.float_id}.csv", _csv(["time", "toa_s", "beacon_id"], rows))
+        write_text_atomic(outdir / f"{info.float_id}.csv", _csv(["time", "toa_s", "beacon_id"], rows))
         truth_rows = [
             [_iso(t), f"{la:.6f}", f"{lo:.6f}"]
             for t, la, lo in zip(
-                sf.truth["time"].to_numpy(dtype="datetime64[ns]"),
-                sf.truth["lat"].to_numpy(dtype=float),
-                sf.truth["lon"].to_numpy(dtype=float),
+                truth["time"].to_numpy(dtype="datetime64[ns]"),
+                truth["lat"].to_numpy(dtype=float),
+                truth["lon"].to_numpy(dtype=float),
                 strict=True,
             )
         ]
-        write_text_atomic(outdir / "truth" / f"{sf.info.float_id}.csv", _csv(["time", "lat", "lon"], truth_rows))
-    write_text_atomic(outdir / "rafostrack.toml", config_text)
+        write_text_atomic(outdir / "truth" / f"{info.float_id}.csv", _csv(["time", "lat", "lon"], truth_rows))

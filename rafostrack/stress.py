@@ -1,0 +1,408 @@
+"""A stress scenario: missions from a generator that is NOT the tracker's model.
+
+The tracker's own simulator (`rafostrack.simulate`) draws from the tracker's model, so it
+cannot show what the model lacks. This generator shares only geometry with the tracker
+(`geodesy`: ranges and displacements) and the file format; its physics is its own, every
+phenomenon an independent knob of `StressConfig`, intensities drawn per float or beacon:
+
+- geometry: the real DIMES array (all 12 sources, March-October 2010) or the real Weddell
+  Sea array (the 11 sources active April-November 2008, with their real offsets and clock
+  drifts); floats launched where at least 3 sources are within 900 km;
+- drift: a meandering zonal jet (core speed and sign per geometry), a field of coherent
+  rotating eddies drifting with it (a float near one loops around it for weeks), and
+  small-scale OU velocity noise; integrated hourly (second-order Runge-Kutta);
+- recording gaps of several days (no windows at all), scattered missing days, and windows
+  that stored nothing;
+- detection: per beacon a peak probability and a range at which it halves (logistic
+  fall-off of per-beacon width), and a two-state Markov "bad propagation" regime per beacon
+  (detection x 0.3 while bad);
+- multipath: per float a fraction of detected arrivals delayed by a lognormal delay
+  (median 20 s, 5-60 s); half of them replace the direct arrival, half come as an echo
+  after it; their label is their beacon;
+- source outages: one or two beacons silent for 20-60 days, not stated in beacons.csv;
+- clocks: the float clock wanders smoothly (+-1-3 s) about the linear model given in
+  floats.csv; each source's clock drifts +-0.01 s/day from its catalogue value;
+- sound speed: the truth's effective sound speed differs from the tracker's default (1480
+  m/s) by a per-geometry amount, and per beacon by a little more;
+- TOA noise: Student-t (5 dof) scaled to a per-float sd of 1.5-3 s;
+- clutter: Poisson per window at the float's rate, uniform in the window, and occasional
+  bursts of 3-6 more.
+The float stores the earliest `max_signals` signals of its window.
+
+All randomness comes from one `numpy.random.Generator`, drawn in a fixed order (the
+geometry's beacons, then float by float: launch, drift, events, then window by window), so
+a seed gives byte-identical files. `truth/<float_id>.json` records what happened to each
+float (gaps, outages, eddies met, multipath fraction, true sound speed, ...).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from .domain import ArrivalRecord, BeaconTable, FloatInfo, NaT, Window
+from .geodesy import displace, local_offsets_km, range_m
+from .io.atomic import write_text_atomic
+
+DAY_NS = np.timedelta64(86400, "s").astype("timedelta64[ns]")
+TOA_DECIMALS = 2
+DEFAULT_SOUND_SPEED_M_S = 1480.0  # the tracker's default: the truth differs from it
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """A real array over a period, the window the floats listen in, and its current."""
+
+    name: str
+    start: str  # first day of the missions
+    window_open_s: float  # window opening, seconds after the day's reference time
+    window_s: float
+    jet_lat: float  # mean latitude of the jet's core
+    jet_speed_km_per_day: float  # core speed (eastward positive)
+    sound_speed_m_s: float  # the truth's effective sound speed
+
+
+GEOMETRIES = {
+    "dimes": Geometry("dimes", "2010-03-01", 3600.0, 4200.0, -57.5, 7.0, 1488.0),
+    "weddell": Geometry("weddell", "2008-04-01", 1500.0, 5000.0, -65.5, -4.0, 1471.0),
+}
+
+
+@dataclass(frozen=True)
+class StressConfig:
+    """The phenomena and their ranges; each can be turned off (for ablation)."""
+
+    days: int = 240
+    max_signals: int = 4
+    clutter_rate: float = 2.0
+    # drift
+    jet: bool = True
+    eddies: bool = True
+    eddy_count: int = 14  # within ~700 km of the launch
+    eddy_radius_km: tuple[float, float] = (25.0, 60.0)
+    eddy_swirl_km_per_day: tuple[float, float] = (5.0, 15.0)
+    noise_velocity_km_per_day: float = 1.5
+    noise_timescale_days: float = 3.0
+    # records
+    gaps: bool = True
+    gap_count: tuple[int, int] = (1, 3)
+    gap_days: tuple[int, int] = (3, 8)
+    missing_day_prob: float = 0.03
+    empty_window_prob: float = 0.02
+    # detection
+    fading: bool = True
+    p_detect: tuple[float, float] = (0.75, 0.97)
+    range_km: tuple[float, float] = (700.0, 1300.0)
+    falloff_km: tuple[float, float] = (60.0, 150.0)
+    bad_propagation: bool = True
+    # multipath
+    multipath: bool = True
+    multipath_fraction: tuple[float, float] = (0.03, 0.12)
+    # sources
+    outage: bool = True
+    outage_days: tuple[int, int] = (20, 60)
+    source_drift_s_per_day: float = 0.01
+    # float clock
+    clock_wander: bool = True
+    clock_wander_s: tuple[float, float] = (1.0, 3.0)
+    # sound speed
+    sound_speed_mismatch: bool = True
+    beacon_sound_speed_sd_m_s: float = 2.0
+    # TOA noise and clutter
+    toa_sd_s: tuple[float, float] = (1.5, 3.0)
+    heavy_tails: bool = True
+    burst_prob: float = 0.03
+
+
+@dataclass(frozen=True)
+class StressFloat:
+    info: FloatInfo
+    record: ArrivalRecord
+    truth: pd.DataFrame  # time, lat, lon (daily at the window times, plus launch and end)
+    events: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class StressMission:
+    geometry: str
+    beacons: BeaconTable  # as the tracker sees them (catalogue offsets and drifts)
+    floats: list[StressFloat]
+
+
+# --------------------------------------------------------------------------------------
+# Geometry
+
+
+def _read_csv(name: str) -> pd.DataFrame:
+    text = resources.files("rafostrack").joinpath("data", name).read_text(encoding="utf-8")
+    return pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False)
+
+
+def catalogue(geometry: Geometry) -> BeaconTable:
+    """The array's sources active through the whole period, with catalogue offsets (relative
+    to the window's opening) and drifts."""
+    start = np.datetime64(geometry.start, "D").astype("datetime64[ns]")
+    end = start + 300 * DAY_NS
+    if geometry.name == "dimes":
+        src = _read_csv("dimes_sound_sources.csv").rename(
+            columns={"source_id": "beacon_id", "transmit_offset_s": "offset_s", "deployed": "start"}
+        )
+        src["end"] = ""
+    else:
+        src = _read_csv("weddell_sound_sources.csv")
+    t0 = pd.to_datetime(src["start"]).to_numpy(dtype="datetime64[ns]")
+    t1 = pd.to_datetime(src["end"].replace("", None)).to_numpy(dtype="datetime64[ns]")
+    active = (t0 <= start) & (np.isnat(t1) | (t1 >= end))
+    src = src[active].reset_index(drop=True)
+    n = len(src)
+    return BeaconTable(
+        beacon_id=src["beacon_id"].to_numpy(dtype=object),
+        lat=src["lat"].astype(float).to_numpy(),
+        lon=src["lon"].astype(float).to_numpy(),
+        offset_s=src["offset_s"].astype(float).to_numpy() - geometry.window_open_s,
+        drift_s_per_day=src["drift_s_per_day"].astype(float).to_numpy(),
+        start=t0[active],
+        end=np.full(n, NaT),
+    )
+
+
+def _launch_position(beacons: BeaconTable, rng: np.random.Generator) -> tuple[float, float]:
+    """A position with at least 3 sources within 900 km: a random source, then a random
+    offset of 100-700 km from it, retried until the condition holds."""
+    for _ in range(1000):
+        i = rng.integers(len(beacons))
+        r, a = rng.uniform(100.0, 700.0), rng.uniform(0.0, 2 * np.pi)
+        lat, lon = displace(beacons.lat[i], beacons.lon[i], r * np.cos(a), r * np.sin(a))
+        if np.sum(range_m(lat, lon, beacons.lat, beacons.lon) < 900e3) >= 3:
+            return float(lat), float(lon)
+    raise RuntimeError("no launch position with 3 sources within 900 km")
+
+
+# --------------------------------------------------------------------------------------
+# Drift
+
+
+@dataclass(frozen=True)
+class _Eddy:
+    lat: float
+    lon: float
+    radius_km: float
+    swirl_km_per_day: float  # signed: positive anticlockwise
+
+
+def _velocity(
+    lat: float, lon: float, t_days: float, geometry: Geometry, cfg: StressConfig, eddies: list[_Eddy]
+) -> NDArray[np.float64]:
+    """East/north velocity (km/day) of the field at a position and time."""
+    v = np.zeros(2)
+    if cfg.jet:
+        core = geometry.jet_lat + 1.2 * math.sin(2 * math.pi * (lon / 25.0 - t_days / 120.0))
+        v[0] += geometry.jet_speed_km_per_day * math.exp(-(((lat - core) / 1.5) ** 2))
+        v[0] += 0.25 * geometry.jet_speed_km_per_day  # a weaker flow everywhere
+    for e in eddies:
+        drift = 0.3 * t_days * (geometry.jet_speed_km_per_day if cfg.jet else 0.0)
+        ex, ny = local_offsets_km(lat, lon, e.lat, e.lon)
+        dx, dy = float(ex) - drift, float(ny)
+        r = math.hypot(dx, dy)
+        if r > 4 * e.radius_km:
+            continue
+        speed = e.swirl_km_per_day * (r / e.radius_km) * math.exp(0.5 * (1 - (r / e.radius_km) ** 2))
+        if r > 0:
+            v += speed * np.array([-dy / r, dx / r])
+    return v
+
+
+def simulate_track(
+    launch: tuple[float, float], times: NDArray[np.datetime64], geometry: Geometry, cfg: StressConfig,
+    rng: np.random.Generator,
+) -> tuple[pd.DataFrame, list[_Eddy]]:  # fmt: skip
+    """Positions at `times` (launch first) integrated hourly through the field."""
+    eddies = []
+    if cfg.eddies:
+        for _ in range(cfg.eddy_count):
+            r, a = rng.uniform(0.0, 700.0), rng.uniform(0.0, 2 * np.pi)
+            elat, elon = displace(launch[0], launch[1], r * np.cos(a), r * np.sin(a))
+            swirl = rng.uniform(*cfg.eddy_swirl_km_per_day) * rng.choice([-1.0, 1.0])
+            eddies.append(_Eddy(float(elat), float(elon), rng.uniform(*cfg.eddy_radius_km), float(swirl)))
+    t0 = times[0]
+    total_h = round(float((times[-1] - t0) / np.timedelta64(1, "h")))
+    h = 1.0 / 24.0
+    a = math.exp(-h / cfg.noise_timescale_days)
+    noise = rng.standard_normal((total_h + 1, 2)) * cfg.noise_velocity_km_per_day * math.sqrt(1 - a * a)
+    u = rng.standard_normal(2) * cfg.noise_velocity_km_per_day
+    lat, lon = launch
+    path = np.empty((total_h + 1, 2))
+    path[0] = lat, lon
+    for k in range(total_h):
+        t = k * h
+        v1 = _velocity(lat, lon, t, geometry, cfg, eddies) + u
+        mlat, mlon = displace(lat, lon, 0.5 * h * v1[0], 0.5 * h * v1[1])
+        v2 = _velocity(float(mlat), float(mlon), t + 0.5 * h, geometry, cfg, eddies) + u
+        lat, lon = (float(x) for x in displace(lat, lon, h * v2[0], h * v2[1]))
+        u = a * u + noise[k]
+        path[k + 1] = lat, lon
+    hours = np.round((times - t0) / np.timedelta64(1, "h")).astype(int)
+    track = pd.DataFrame({"time": times.astype("datetime64[ns]"), "lat": path[hours, 0], "lon": path[hours, 1]})
+    return track, eddies
+
+
+# --------------------------------------------------------------------------------------
+# Arrivals
+
+
+def _window_days(cfg: StressConfig, rng: np.random.Generator) -> tuple[NDArray[np.int64], list[list[int]]]:
+    """Days (1..days) with a window, after gaps and missing days; and the gaps as day lists."""
+    days = np.arange(1, cfg.days + 1)
+    keep = np.ones(len(days), dtype=bool)
+    gaps = []
+    if cfg.gaps:
+        for _ in range(rng.integers(cfg.gap_count[0], cfg.gap_count[1] + 1)):
+            length = int(rng.integers(cfg.gap_days[0], cfg.gap_days[1] + 1))
+            first = int(rng.integers(10, cfg.days - length - 10))
+            keep[first : first + length] = False
+            gaps.append([first + 1, first + length])
+        keep &= rng.random(len(days)) >= cfg.missing_day_prob
+    return days[keep], gaps
+
+
+def simulate_float(
+    float_id: str, beacons: BeaconTable, geometry: Geometry, cfg: StressConfig, rng: np.random.Generator
+) -> StressFloat:
+    """One float: launch, drift, events, then its windows in time order."""
+    start = np.datetime64(geometry.start, "D").astype("datetime64[ns]")
+    launch = _launch_position(beacons, rng)
+    all_times = start + DAY_NS * np.arange(cfg.days + 1)
+    truth, eddies = simulate_track(launch, all_times, geometry, cfg, rng)
+    n_b = len(beacons)
+    # Per-float and per-beacon properties, drawn in this order.
+    toa_sd = rng.uniform(*cfg.toa_sd_s)
+    mp_frac = rng.uniform(*cfg.multipath_fraction) if cfg.multipath else 0.0
+    p_max = rng.uniform(*cfg.p_detect, n_b) if cfg.fading else np.full(n_b, 0.9)
+    r50 = rng.uniform(*cfg.range_km, n_b) if cfg.fading else np.full(n_b, 1e5)
+    width = rng.uniform(*cfg.falloff_km, n_b)
+    spread = rng.normal(0.0, cfg.beacon_sound_speed_sd_m_s, n_b)
+    if cfg.sound_speed_mismatch:
+        c_beacon = geometry.sound_speed_m_s + spread
+    else:
+        c_beacon = np.full(n_b, DEFAULT_SOUND_SPEED_M_S)
+    drift_error = rng.uniform(-1, 1, n_b) * cfg.source_drift_s_per_day
+    wander_amp = rng.uniform(*cfg.clock_wander_s) if cfg.clock_wander else 0.0
+    wander_period, wander_phase = rng.uniform(60.0, 200.0), rng.uniform(0, 2 * np.pi)
+    outages = []
+    if cfg.outage:
+        for i in rng.choice(n_b, size=int(rng.integers(1, 3)), replace=False):
+            length = int(rng.integers(cfg.outage_days[0], cfg.outage_days[1] + 1))
+            first = int(rng.integers(20, max(21, cfg.days - length - 20)))
+            outages.append((int(i), first, first + length))
+    days, gaps = _window_days(cfg, rng)
+    clock0, clock1 = rng.uniform(-2.0, 2.0, 2)
+    info = FloatInfo(
+        float_id, start, launch[0], launch[1], start + cfg.days * DAY_NS,
+        float(truth["lat"].iloc[-1]), float(truth["lon"].iloc[-1]), round(float(clock0), 2), round(float(clock1), 2),
+        geometry.window_s, cfg.max_signals,
+    )  # fmt: skip
+    bad = np.zeros(n_b, dtype=bool)
+    windows = []
+    ids = np.asarray(beacons.beacon_id, dtype=object)
+    for d in days:
+        t = start + d * DAY_NS
+        lat, lon = float(truth["lat"].iloc[d]), float(truth["lon"].iloc[d])
+        if cfg.bad_propagation:  # two-state Markov regime per beacon: 10% bad on average
+            flip = rng.random(n_b)
+            bad = np.where(bad, flip > 0.25, flip < 0.028)
+        frac = d / cfg.days
+        wander = wander_amp * math.sin(2 * math.pi * d / wander_period + wander_phase) * 4 * frac * (1 - frac)
+        rng_m = range_m(lat, lon, beacons.lat, beacons.lon)
+        epoch_days = (t - beacons.start) / DAY_NS
+        arrival = (beacons.offset_s + (beacons.drift_s_per_day + drift_error) * epoch_days
+                   + clock0 + frac * (clock1 - clock0) + wander + rng_m / c_beacon)  # fmt: skip
+        pd_i = p_max / (1.0 + np.exp((rng_m / 1e3 - r50) / width)) * np.where(bad, 0.3, 1.0)
+        silent = np.array([any(i == j and a <= d < b for j, a, b in outages) for i in range(n_b)])
+        detected = (rng.random(n_b) < pd_i) & ~silent
+        noise = (
+            rng.standard_t(5, n_b) * toa_sd / math.sqrt(5.0 / 3.0) if cfg.heavy_tails else rng.normal(0, toa_sd, n_b)
+        )
+        delayed = rng.random(n_b) < mp_frac
+        delay = np.clip(np.exp(rng.normal(math.log(20.0), 0.6, n_b)), 5.0, 60.0)
+        echo = rng.random(n_b) < 0.5
+        toa = arrival + noise
+        times_, labels = [], []
+        for i in np.flatnonzero(detected):
+            if not delayed[i] or echo[i]:  # the direct arrival
+                times_.append(toa[i])
+                labels.append(ids[i])
+            if delayed[i]:  # the delayed one, replacing it or as an echo after it
+                times_.append(toa[i] + delay[i])
+                labels.append(ids[i])
+        n_clutter = rng.poisson(cfg.clutter_rate) + (int(rng.integers(3, 7)) if rng.random() < cfg.burst_prob else 0)
+        times_ += list(rng.uniform(0.0, geometry.window_s, n_clutter))
+        labels += [None] * n_clutter
+        arr = np.round(np.array(times_, dtype=float), TOA_DECIMALS) + 0.0
+        lab = np.array(labels, dtype=object)
+        inside = (arr >= 0) & (arr <= geometry.window_s)
+        order = np.argsort(arr[inside], kind="stable")
+        arr, lab = arr[inside][order], lab[inside][order]
+        if rng.random() < cfg.empty_window_prob:
+            arr, lab = arr[:0], lab[:0]
+        n = min(len(arr), cfg.max_signals)
+        windows.append(Window(t, arr[:n].copy(), tuple(lab[:n])))
+    record = ArrivalRecord(float_id, Path(f"{float_id}.csv"), tuple(windows))
+    kept = np.concatenate([[0], days, [cfg.days]]) if days[-1] != cfg.days else np.concatenate([[0], days])
+    events = {
+        "geometry": geometry.name,
+        "true_sound_speed_m_s": round(float(np.mean(c_beacon)), 2),
+        "toa_sd_s": round(float(toa_sd), 3),
+        "multipath_fraction": round(float(mp_frac), 4),
+        "clutter_rate": cfg.clutter_rate,
+        "gaps_days": gaps,
+        "outages": [{"beacon": str(ids[i]), "days": [a, b]} for i, a, b in outages],
+        "clock_wander_s": round(float(wander_amp), 3),
+        "eddies_within_60km_days": int(
+            sum(
+                any(float(range_m(la, lo, e.lat, e.lon)) < 60e3 for e in eddies)
+                for la, lo in zip(truth["lat"][::5], truth["lon"][::5], strict=True)
+            )
+            * 5
+        ),
+    }
+    return StressFloat(info, record, truth.iloc[np.unique(kept)].reset_index(drop=True), events)
+
+
+def simulate_stress(
+    geometry: str, n_floats: int, rng: np.random.Generator, cfg: StressConfig = StressConfig(), prefix: str = "s"
+) -> StressMission:
+    """`n_floats` floats of one geometry."""
+    geo = GEOMETRIES[geometry]
+    beacons = catalogue(geo)
+    floats = [simulate_float(f"{prefix}{k + 1:02d}", beacons, geo, cfg, rng) for k in range(n_floats)]
+    return StressMission(geometry, beacons, floats)
+
+
+def write_stress_mission(mission: StressMission, outdir: Path) -> None:
+    """A mission directory: beacons.csv, floats.csv, the arrival files (true labels in
+    beacon_id), truth/<float_id>.csv and truth/<float_id>.json. No rafostrack.toml: the
+    tracker runs with its defaults, knowing only what a user would know."""
+    from .io.mission_writer import write_mission_files
+
+    write_mission_files(mission.beacons, [(f.info, f.record, f.truth) for f in mission.floats], Path(outdir))
+    for f in mission.floats:
+        write_text_atomic(Path(outdir) / "truth" / f"{f.info.float_id}.json", json.dumps(f.events, indent=2) + "\n")
+
+
+def with_knobs(cfg: StressConfig, settings: dict[str, Any]) -> StressConfig:
+    """`cfg` with some knobs replaced (names checked)."""
+    names = {f.name for f in dataclasses.fields(StressConfig)}
+    unknown = sorted(set(settings) - names)
+    if unknown:
+        raise ValueError(f"unknown stress knob(s): {', '.join(unknown)}; known: {', '.join(sorted(names))}")
+    return dataclasses.replace(cfg, **settings)
