@@ -171,8 +171,9 @@ def track(
         n = len(result.run["warnings"])
         click.echo(f"rafostrack: {n} warning(s), also listed in {result.out_dir / 'run.json'}", err=True)
     counts = result.run["counts"]
+    status = ", ".join(f"{n} {name}" for name, n in counts["status"].items())
     click.echo(
-        f"{result.float_id}: {counts['windows']} windows, {counts['toas']} TOAs "
+        f"{result.float_id}: {counts['windows']} windows ({status}), {counts['toas']} TOAs "
         f"({counts['labelled_beacon']} labelled to beacons, {counts['labelled_clutter']} clutter), "
         f"{result.run['runtime_s']:.1f} s -> {result.out_dir}"
     )

@@ -21,6 +21,7 @@ from .domain import Particles, Window
 from .filter import Step
 from .posterior import two_modes
 from .resampling import ess
+from .smoother import Smoothed
 
 TRACK_COLUMNS = (
     "float_id",
@@ -36,6 +37,7 @@ TRACK_COLUMNS = (
     "loglik",
     "ambiguous",
     "second_mode_km",
+    "status",
 )
 LABEL_COLUMNS = ("float_id", "time", "rank", "toa_s", "beacon_id", "prob", "p_clutter")
 MODE_COLUMNS = ("float_id", "time", "mode", "lat", "lon", "weight", "sd_km")
@@ -86,9 +88,16 @@ class EstimateBuilder:
         self._labels: list[tuple] = []
         self._modes: list[tuple] = []
 
-    def add(self, step: Step, weights: NDArray | None = None, label_probs: LabelProbs | None = None) -> None:
+    def add(
+        self,
+        step: Step,
+        weights: NDArray | None = None,
+        label_probs: LabelProbs | None = None,
+        kernel_cov_km2: NDArray | None = None,
+    ) -> None:
         """Summarise `step` under `weights` (default: its filter weights). Labels come from
-        the step's filtered marginals, or from `label_probs` under the given weights."""
+        the step's filtered marginals, or from `label_probs` under the given weights; a
+        regularised smoother's kernel covariance widens every position's covariance."""
         window = step.window
         if window is None:  # a position fix: an observation, not an output row
             return
@@ -102,6 +111,7 @@ class EstimateBuilder:
             min_weight=amb.min_mode_weight,
             min_separation_km=amb.min_separation_km,
             separation_factor=amb.separation_factor,
+            kernel_cov_km2=kernel_cov_km2,
         )
         self.window_ess.append(step.ess)
         position = modes.first if modes.ambiguous else modes.whole
@@ -135,6 +145,8 @@ class EstimateBuilder:
         else:
             probs, index = np.zeros((0, 0)), np.zeros(0, dtype=np.intp)
         self._labels.extend(label_rows(self.float_id, window, self.beacon_ids, index, probs))
+        heard = float(probs.sum()) if probs.size else 0.0  # expected signals from beacons
+        self._track[-1] = (*self._track[-1], window_status(step.reseeded_mass, modes.ambiguous, heard))
 
     def result(self) -> Estimate:
         return Estimate(
@@ -145,23 +157,37 @@ class EstimateBuilder:
         )
 
 
+def window_status(reseeded_mass: float, ambiguous: bool, heard: float) -> str:
+    """What supports a window's position: `recovered` (the filter lost the float and
+    re-acquired it here: re-seeded particles carry most of the mass), `ambiguous` (two
+    separate modes), `unsupported` (less than one stored signal expected from a beacon: the
+    drift model carries the position), else `ok`. The first that applies."""
+    if reseeded_mass > 0.5:
+        return "recovered"
+    if ambiguous:
+        return "ambiguous"
+    if heard < 1.0:
+        return "unsupported"
+    return "ok"
+
+
 def build_estimate(
     float_id: str,
     steps: Sequence[Step],
     beacon_ids: NDArray,
     ambiguity: AmbiguityConfig,
-    smoothed_weights: Sequence[NDArray] | None = None,
+    smoothed: Smoothed | None = None,
     label_probs: LabelProbs | None = None,
 ) -> Estimate:
     """Tables for every window among `steps`: filtered (each step's own weights), or under
-    `smoothed_weights` (one array per step) with labels from `label_probs`."""
-    builder = EstimateBuilder(float_id, beacon_ids, ambiguity, "filtered" if smoothed_weights is None else "smoothed")
-    if smoothed_weights is None:
+    the `smoothed` weights (one array per step) with labels from `label_probs`."""
+    builder = EstimateBuilder(float_id, beacon_ids, ambiguity, "filtered" if smoothed is None else "smoothed")
+    if smoothed is None:
         for step in steps:
             builder.add(step)
     else:
-        for step, weights in zip(steps, smoothed_weights, strict=True):
-            builder.add(step, weights, label_probs)
+        for step, weights, kernel in zip(steps, smoothed.weights, smoothed.kernel_cov_km2, strict=True):
+            builder.add(step, weights, label_probs, kernel)
     return builder.result()
 
 

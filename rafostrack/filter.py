@@ -55,7 +55,7 @@ class Step:
     observation: Observation
     beacon_index: NDArray[np.intp]  # beacon-table rows of the label_probs rows
     label_probs: NDArray[np.float64] | None  # (s, K) filtered P(signal j from beacon i), if kept
-    proposed_mass: float = 0.0  # posterior mass of particles drawn from data-driven proposals
+    reseeded_mass: float = 0.0  # posterior mass of particles re-seeded by the recovery search
 
     @property
     def window(self) -> Window | None:
@@ -146,10 +146,12 @@ class ParticleFilter:
             moved = self.motion.propagate(particles, dt_days, rng)
             evidence = self._evaluate(moved, obs)
             proposals = [] if self.guide is None else list(self.guide(obs))
+            reseed_source = -1  # the `source` value of re-seeded particles, if any
             if monitor is not None and isinstance(obs, Window):
                 reseed = monitor.proposal(obs, dt_days, moved, prior_weights, evidence.loglik)
                 if reseed is not None:
                     proposals.append((monitor.settings.fraction, reseed))
+                    reseed_source = len(proposals)
             source = np.zeros(n, dtype=np.intp)
             correction = np.zeros(n)
             if proposals:
@@ -175,7 +177,7 @@ class ParticleFilter:
                 observation=obs,
                 beacon_index=evidence.beacon_index,
                 label_probs=probs,
-                proposed_mass=float(weights[source > 0].sum()),
+                reseeded_mass=float(weights[source == reseed_source].sum()),
             )
             if on_step is not None:
                 on_step(step)

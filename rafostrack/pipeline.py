@@ -207,6 +207,7 @@ def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, el
             "recovery_checks": output.n_checks,
             "recovery_reseeds": output.n_reseeds,
             "ambiguous_windows": int(output.track["ambiguous"].sum()),
+            "status": {k: int(v) for k, v in output.track["status"].value_counts().sort_index().items()},
             "warnings": len(loaded.warnings) + len(output.warnings),
         },
         "warnings": [*loaded.warnings.messages, *output.warnings],

@@ -90,6 +90,7 @@ def two_modes(
     min_separation_km: float,
     separation_factor: float,
     iterations: int = 20,
+    kernel_cov_km2: NDArray | None = None,
 ) -> Modes:
     """Split the cloud into two clusters (weighted 2-means, started across the principal
     axis) and decide whether they are separate modes.
@@ -99,7 +100,11 @@ def two_modes(
     d >= `separation_factor` * (s_1 + s_2), with s_k the sd of cluster k along the line
     joining the means. A unimodal Gaussian split this way gives d / (s_1 + s_2) ~ 1.3;
     two modes far apart relative to their widths give much larger ratios.
+
+    `kernel_cov_km2`: when each particle stands for a Gaussian kernel of this covariance (a
+    regularised smoother, `smoother.smooth`), it is added to every cluster's covariance.
     """
+    kernel = np.zeros((2, 2)) if kernel_cov_km2 is None else np.asarray(kernel_cov_km2)
     carried = weights > 0  # smoothing leaves exact zeros; they belong to no mode
     lat, lon, weights = lat[carried], lon[carried], weights[carried]
     ref_lat, ref_lon, xy = _frame(lat, lon, weights)
@@ -115,7 +120,7 @@ def two_modes(
         if np.array_equal(new_side, side):
             break
         side = new_side
-    whole = _to_gaussian(ref_lat, ref_lon, mean, cov)
+    whole = _to_gaussian(ref_lat, ref_lon, mean, cov + kernel)
     if side.all() or not side.any():
         return Modes(whole, whole, whole, 1.0, 0.0, 0.0, False)
 
@@ -123,7 +128,7 @@ def two_modes(
     for member in (side, ~side):
         w = weights[member]
         m, c = _weighted_mean_cov(xy[member], w)
-        clusters.append((float(w.sum() / weights.sum()), m, c))
+        clusters.append((float(w.sum() / weights.sum()), m, c + kernel))
     clusters.sort(key=lambda c: -c[0])
     (w1, m1, c1), (w2, m2, c2) = clusters
     gap = m2 - m1

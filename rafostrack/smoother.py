@@ -21,6 +21,7 @@ and S_j = sum_i E_ji this is W_{t|T} proportional to E^T (W_{t+1|T} / S).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -149,7 +150,16 @@ def regularised(kernel: LinearGaussian, spread: NDArray[np.float64]) -> LinearGa
     return LinearGaussian(kernel.A, kernel.b, vectors * np.sqrt(np.clip(values, 0.0, None)))
 
 
-def smooth(clouds: Sequence[Cloud], motion: MotionModel, *, regularise: bool = True) -> list[NDArray[np.float64]]:
+@dataclass(frozen=True)
+class Smoothed:
+    """Smoothed weights of every step, and the covariance (km^2, east/north) of the kernel
+    each particle stands for (zero when not regularised)."""
+
+    weights: list[NDArray[np.float64]]
+    kernel_cov_km2: list[NDArray[np.float64]]
+
+
+def smooth(clouds: Sequence[Cloud], motion: MotionModel, *, regularise: bool = True) -> Smoothed:
     """Smoothed marginal weights of every step, given the filter's clouds in time order.
 
     `regularise`: each filter particle stands for a Gaussian kernel of covariance h^2 Sigma_t
@@ -160,16 +170,18 @@ def smooth(clouds: Sequence[Cloud], motion: MotionModel, *, regularise: bool = T
     few of them, and the smoothed spread with them; the kernel keeps each step's smoothed
     weights spread over the particles that the data allow, at the price of a posterior
     slightly wider than exact (by about h^2 Sigma_t: a few per cent of the filter's spread).
+    The smoothed marginal is then the mixture of those kernels: its covariance is the
+    weighted particles' plus h^2 Sigma_t (`Smoothed.kernel_cov_km2`, the position block).
     """
     if not clouds:
-        return []
+        return Smoothed([], [])
     smoothed = [np.empty(0)] * len(clouds)
     smoothed[-1] = clouds[-1].weights / clouds[-1].weights.sum()
     h2 = silverman_bandwidth(len(clouds[0].weights), motion.dim) ** 2 if regularise else 0.0
+    spreads = [h2 * cloud_covariance(c) if h2 > 0 else np.zeros((motion.dim, motion.dim)) for c in clouds]
     for t in range(len(clouds) - 2, -1, -1):
         components = motion.components(max(days_between(clouds[t].time, clouds[t + 1].time), 0.0))
         if h2 > 0:
-            spread = h2 * cloud_covariance(clouds[t])
-            components = [(components[0][0], regularised(components[0][1], spread)), *components[1:]]
+            components = [(components[0][0], regularised(components[0][1], spreads[t])), *components[1:]]
         smoothed[t] = backward_step(clouds[t], clouds[t + 1], smoothed[t + 1], components)
-    return smoothed
+    return Smoothed(smoothed, [s[:2, :2] for s in spreads])

@@ -163,9 +163,9 @@ class Tracker:
         filtered = build_estimate(float_id, run.steps, self.beacon_ids, self.ambiguity) if also_filtered else None
 
         started = time.perf_counter()
-        weights = smooth([s.cloud for s in run.steps], self.motion)
+        smoothed = smooth([s.cloud for s in run.steps], self.motion)
         estimate = build_estimate(
-            float_id, run.steps, self.beacon_ids, self.ambiguity, weights, self.arrivals.label_probs
+            float_id, run.steps, self.beacon_ids, self.ambiguity, smoothed, self.arrivals.label_probs
         )
         smoother_s = time.perf_counter() - started
         return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s, **_counts(run))

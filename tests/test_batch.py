@@ -435,7 +435,7 @@ def test_progress_bar_on_a_terminal_and_lines_otherwise():
 
 
 @pytest.mark.reliability
-def test_batch_jobs_do_not_changeparquet_bytes(tmp_path):
+def test_batch_jobs_do_not_change_outputs(tmp_path):
     """`batch --jobs 1` and `--jobs 2` (run as subprocesses: worker pools stay out of the
     test process) and `track` give the same Parquet bytes."""
     if "batch" not in main.commands:

@@ -89,7 +89,7 @@ def test_smoothed_marginals_match_the_exact_rts_smoother(name):
         clouds.append(Cloud(T0 + t * DAY, Particles(lat, lon, velocity), w))
         filt_means.append(states[:2] @ w)
         states = states[:, systematic(w, rng)]
-    smoothed = smooth(clouds, motion)
+    smoothed = smooth(clouds, motion).weights
     m_s, p_s = _rts(y, tr, h, r, m0, p0)
     z, z_filter, sd_ratio = [], [], []  # errors in units of the exact smoothed sd, per axis and time
     for t, (cloud, w) in enumerate(zip(clouds, smoothed, strict=True)):
