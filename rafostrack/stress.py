@@ -367,6 +367,17 @@ def simulate_float(
         "gaps_days": gaps,
         "outages": [{"beacon": str(ids[i]), "days": [a, b]} for i, a, b in outages],
         "clock_wander_s": round(float(wander_amp), 3),
+        "clock_wander": {"period_days": round(float(wander_period), 4), "phase": round(float(wander_phase), 6)},
+        "beacons": {
+            str(ids[i]): {
+                "sound_speed_m_s": round(float(c_beacon[i]), 3),
+                "drift_error_s_per_day": round(float(drift_error[i]), 6),
+                "p_detect": round(float(p_max[i]), 4),
+                "detection_range_km": round(float(r50[i]), 1),
+                "falloff_km": round(float(width[i]), 1),
+            }
+            for i in range(n_b)
+        },
         "eddies_within_60km_days": int(
             sum(
                 any(float(range_m(la, lo, e.lat, e.lon)) < 60e3 for e in eddies)
