@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .domain import Cloud, Particles, PositionFix, Window, days_between
-from .likelihoods import ArrivalLikelihood, Evidence, Likelihood
+from .likelihoods import ArrivalLikelihood, Evidence, Likelihood, MoveFactor
 from .motion import MotionModel
 from .recovery import RecoveryMonitor, RecoverySettings
 from .resampling import Resampler, ess, normalise_log_weights
@@ -108,8 +108,10 @@ class ParticleFilter:
         label_probs: bool = True,
         recovery: RecoverySettings | None = None,
         guide: Guide | None = None,
+        factors: Sequence[MoveFactor] = (),
     ):
-        """`label_probs=False` skips the filtered association marginals (when only smoothed
+        """`factors` weigh each particle's move (e.g. context constraints).
+        `label_probs=False` skips the filtered association marginals (when only smoothed
         labels are wanted, which are recomputed after smoothing)."""
         self.motion = motion
         self.arrivals = arrivals
@@ -118,6 +120,7 @@ class ParticleFilter:
         self.label_probs = label_probs
         self.recovery = recovery
         self.guide = guide
+        self.factors = tuple(factors)
 
     def run(
         self,
@@ -162,6 +165,8 @@ class ParticleFilter:
             warnings.extend(evidence.warnings)
             loglik, skipped = _finite_loglik(evidence.loglik, obs, self.arrivals.info.float_id, warnings)
             log_w = log_w + loglik + correction
+            for factor in self.factors:
+                log_w = log_w + factor.log_weight(particles, moved, obs)
             weights, log_post = normalise_log_weights(log_w)
             if monitor is not None and isinstance(obs, Window):
                 monitor.record(log_post - log_prior)

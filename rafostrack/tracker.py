@@ -21,7 +21,13 @@ from .config import AmbiguityConfig, Config
 from .domain import ArrivalRecord, BeaconTable, FloatInfo, PositionFix
 from .estimates import Estimate, EstimateBuilder, build_estimate
 from .filter import FilterResult, FilterSettings, Guide, ParticleFilter, Step, float_rng, observations
-from .likelihoods import ArrivalLikelihood, PositionFixLikelihood, arrivals_from_config
+from .likelihoods import (
+    ArrivalLikelihood,
+    MoveFactor,
+    PositionFixLikelihood,
+    arrivals_from_config,
+    move_factors_from_config,
+)
 from .motion import JumpMixture, MotionModel, motion_from_config
 from .recovery import RecoverySettings
 from .resampling import RESAMPLERS
@@ -84,6 +90,7 @@ class Tracker:
     ambiguity: AmbiguityConfig
     seed: int
     recovery: RecoverySettings | None = None
+    factors: tuple[MoveFactor, ...] = ()
 
     @classmethod
     def from_config(cls, config: Config, beacons: BeaconTable, info: FloatInfo) -> Tracker:
@@ -102,6 +109,7 @@ class Tracker:
             ambiguity=config.ambiguity,
             seed=config.filter.seed,
             recovery=_recovery(config),
+            factors=move_factors_from_config(config, beacons, info),
         )
 
     def run_filter(
@@ -126,6 +134,7 @@ class Tracker:
             label_probs=label_probs,
             recovery=self.recovery,
             guide=guide,
+            factors=self.factors,
         )
         launch = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
         events = observations(record.windows, self.end_fix)
@@ -138,7 +147,13 @@ class Tracker:
         info = self.info
         fixes = PositionFixLikelihood(info.float_id)
         pf = ParticleFilter(
-            self.motion.reversed(), self.arrivals, fixes, self.settings, label_probs=False, recovery=self.recovery
+            self.motion.reversed(),
+            self.arrivals,
+            fixes,
+            self.settings,
+            label_probs=False,
+            recovery=self.recovery,
+            factors=self.factors,
         )
         rng = np.random.default_rng([self.seed, zlib.crc32(info.float_id.encode("utf-8")), 1])
         return pf.run(start, list(reversed(record.windows)), rng)

@@ -10,8 +10,13 @@ from __future__ import annotations
 from ..config import Config
 from ..domain import BeaconTable, FloatInfo
 from .arrivals import ARRIVAL_LIKELIHOODS, ArrivalLikelihood, LabelledArrivals, RankedArrivals
-from .base import Evidence, Likelihood, outlier_scale
+from .base import Evidence, Likelihood, MoveFactor, outlier_scale
 from .fixes import PositionFixLikelihood, fix_loglik
+
+
+def move_factors_from_config(config: Config, beacons: BeaconTable, info: FloatInfo) -> tuple[MoveFactor, ...]:
+    """The configured factors on particle moves (none yet: context constraints plug in here)."""
+    return ()
 
 
 def arrivals_from_config(beacons: BeaconTable, info: FloatInfo, config: Config) -> ArrivalLikelihood:
@@ -25,9 +30,11 @@ __all__ = [
     "Evidence",
     "LabelledArrivals",
     "Likelihood",
+    "MoveFactor",
     "PositionFixLikelihood",
     "RankedArrivals",
     "arrivals_from_config",
     "fix_loglik",
+    "move_factors_from_config",
     "outlier_scale",
 ]

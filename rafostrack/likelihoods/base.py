@@ -50,3 +50,14 @@ class Likelihood(ABC):
     def evaluate(self, particles: Particles, observation: Any, *, marginals: bool = True) -> Evidence:
         """Evidence of `observation` for every particle; `marginals=False` is a hint that
         association marginals are not wanted (they may then be NaN)."""
+
+
+class MoveFactor(ABC):
+    """A factor on each particle's move between two observations: log g(x_prev, x) for the
+    states before and after the motion step at `observation` (e.g. a context constraint
+    applied when a particle enters a new cell of a context grid). The filter adds it to the
+    log-weights beside the observation's likelihood."""
+
+    @abstractmethod
+    def log_weight(self, before: Particles, after: Particles, observation: Any) -> NDArray[np.float64]:
+        """log g per particle (0 where the factor does not apply)."""
