@@ -4,7 +4,8 @@ For each observation in time order: move the particles with the motion model ove
 interval since the previous one (one exact transition, however long the gap), weight
 each by the observation's likelihood (a window's arrival times, or a position fix), keep
 the weighted cloud and the association marginals averaged over it, then resample when
-the effective sample size drops below the threshold. The launch fix is the prior. Weights
+the effective sample size drops below the threshold, each mode of the cloud on its own
+(`FilterSettings.resample`, `rafostrack.clusters`). The launch fix is the prior. Weights
 stay in log space throughout.
 
 The filter is assembled from components (`rafostrack.motion`, `rafostrack.likelihoods`,
@@ -26,7 +27,8 @@ from .domain import Cloud, Particles, PositionFix, Window, days_between
 from .likelihoods import ArrivalLikelihood, Evidence, Likelihood, MoveFactor
 from .motion import MotionModel
 from .recovery import RecoveryMonitor, RecoverySettings
-from .resampling import Resampler, ess, normalise_log_weights
+from .clusters import mode_labels
+from .resampling import Resampler, ess, normalise_log_weights, resample_within, within_mode_ess
 
 Observation = Window | PositionFix
 
@@ -76,9 +78,32 @@ class FilterResult:
 
 @dataclass(frozen=True)
 class FilterSettings:
+    """Size and resampling of the cloud; modes as in `rafostrack.clusters`."""
+
     particles: int
     resample_ess_fraction: float
     resampler: Resampler
+    mode_link_km: float = 15.0
+    max_modes: int = 8
+    min_mode_mass: float = 1e-4
+
+    def resample(self, particles: Particles, weights: NDArray, rng: np.random.Generator) -> tuple[Particles, NDArray]:
+        """Resample within modes when their summed ESS is low: the new particles and their log
+        weights, or the inputs unchanged (log weights) when no resampling is due."""
+        labels = mode_labels(particles.lat, particles.lon, weights, self.mode_link_km)
+        if within_mode_ess(weights, labels) >= self.resample_ess_fraction * len(weights):
+            with np.errstate(divide="ignore"):  # a particle dropped as non-finite has weight 0
+                return particles, np.log(weights)
+        ancestors, new_weights = resample_within(
+            weights,
+            labels,
+            self.resampler,
+            rng,
+            min_count=max(1, self.particles // (2 * self.max_modes)),
+            min_mass=self.min_mode_mass,
+            max_modes=self.max_modes,
+        )
+        return particles.take(ancestors), np.log(new_weights)
 
 
 class Proposal(Protocol):
@@ -188,11 +213,8 @@ class ParticleFilter:
                 on_step(step)
             if keep:
                 kept.append(step)
-            particles = moved
-            if eff < self.settings.resample_ess_fraction * n:
-                particles = particles.take(self.settings.resampler(weights, rng))
-                log_w = np.zeros(n)
-                n_resamples += 1
+            particles, log_w = self.settings.resample(moved, weights, rng)
+            n_resamples += particles is not moved
         checks = (monitor.n_checks, monitor.n_reseeds) if monitor is not None else (0, 0)
         return FilterResult(kept, len(events), n_resamples, warnings, *checks)
 

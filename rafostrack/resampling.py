@@ -1,9 +1,10 @@
 """Particle weights in log space, effective sample size, and resampling schemes.
 
-Every scheme maps normalised weights W (N,) to N ancestor indices with E[copies of p] =
-N W_p; they differ in variance (systematic and stratified are lower than multinomial;
-residual copies floor(N W_p) deterministically). `RESAMPLERS` maps the config's
-`[filter] resampling` to a scheme. Sums avoid BLAS, whose threaded reductions would make
+Every scheme maps normalised weights W (N,) to M ancestor indices (M = N unless given)
+with E[copies of p] = M W_p; they differ in variance (systematic and stratified are lower
+than multinomial; residual copies floor(M W_p) deterministically). `RESAMPLERS` maps the
+config's `[filter] resampling` to a scheme. `resample_within` resamples each mode of a
+multimodal cloud on its own, keeping the modes' masses (`rafostrack.clusters`). Sums avoid BLAS, whose threaded reductions would make
 results depend on the machine's thread count.
 """
 
@@ -15,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import logsumexp
 
-Resampler = Callable[[NDArray, np.random.Generator], NDArray[np.intp]]
+Resampler = Callable[..., NDArray[np.intp]]  # (weights, rng, n=None) -> n ancestor indices
 
 
 def normalise_log_weights(log_w: NDArray) -> tuple[NDArray[np.float64], float]:
@@ -36,33 +37,34 @@ def _inverse_cdf(weights: NDArray, points: NDArray) -> NDArray[np.intp]:
     return np.searchsorted(cumulative, points, side="right")
 
 
-def systematic(weights: NDArray, rng: np.random.Generator) -> NDArray[np.intp]:
-    """Systematic resampling: one uniform U, points (U + k) / N, k = 0..N-1.
+def systematic(weights: NDArray, rng: np.random.Generator, n: int | None = None) -> NDArray[np.intp]:
+    """Systematic resampling: one uniform U, points (U + k) / M, k = 0..M-1.
 
-    Particle p is copied floor(N W_p) or ceil(N W_p) times.
+    Particle p is copied floor(M W_p) or ceil(M W_p) times.
     """
-    n = len(weights)
+    n = len(weights) if n is None else n
     return _inverse_cdf(weights, (rng.random() + np.arange(n)) / n)
 
 
-def stratified(weights: NDArray, rng: np.random.Generator) -> NDArray[np.intp]:
-    """Stratified resampling: one uniform per stratum, points (U_k + k) / N."""
-    n = len(weights)
+def stratified(weights: NDArray, rng: np.random.Generator, n: int | None = None) -> NDArray[np.intp]:
+    """Stratified resampling: one uniform per stratum, points (U_k + k) / M."""
+    n = len(weights) if n is None else n
     return _inverse_cdf(weights, (rng.random(n) + np.arange(n)) / n)
 
 
-def multinomial(weights: NDArray, rng: np.random.Generator) -> NDArray[np.intp]:
-    """Multinomial resampling: N independent draws from W (sorted uniforms)."""
-    return _inverse_cdf(weights, np.sort(rng.random(len(weights))))
+def multinomial(weights: NDArray, rng: np.random.Generator, n: int | None = None) -> NDArray[np.intp]:
+    """Multinomial resampling: M independent draws from W (sorted uniforms)."""
+    n = len(weights) if n is None else n
+    return _inverse_cdf(weights, np.sort(rng.random(n)))
 
 
-def residual(weights: NDArray, rng: np.random.Generator) -> NDArray[np.intp]:
-    """Residual resampling: floor(N W_p) copies of p, the R remaining by multinomial
-    draws from the residual weights N W_p - floor(N W_p)."""
-    n = len(weights)
+def residual(weights: NDArray, rng: np.random.Generator, n: int | None = None) -> NDArray[np.intp]:
+    """Residual resampling: floor(M W_p) copies of p, the R remaining by multinomial
+    draws from the residual weights M W_p - floor(M W_p)."""
+    n = len(weights) if n is None else n
     scaled = n * np.asarray(weights, dtype=float)
     copies = np.floor(scaled).astype(np.intp)
-    fixed = np.repeat(np.arange(n), copies)
+    fixed = np.repeat(np.arange(len(weights)), copies)
     remaining = n - len(fixed)
     if remaining == 0:
         return fixed
@@ -77,3 +79,55 @@ RESAMPLERS: dict[str, Resampler] = {
     "residual": residual,
     "multinomial": multinomial,
 }
+
+
+def within_mode_ess(weights: NDArray, labels: NDArray[np.intp]) -> float:
+    """Sum over modes of each mode's own effective sample size, (sum W)^2 / sum W^2 over
+    its particles: how many particles really serve the modes, whatever their masses."""
+    n_modes = int(labels.max()) + 1
+    mass = np.bincount(labels, weights=weights, minlength=n_modes)
+    square = np.bincount(labels, weights=weights * weights, minlength=n_modes)
+    carried = square > 0
+    return float(np.sum(mass[carried] ** 2 / square[carried]))
+
+
+def allocate(mass: NDArray, n: int, min_count: int) -> NDArray[np.intp]:
+    """Particles per mode: `min_count` each, the rest in proportion to the masses (largest
+    remainders first, ties to the earlier mode). Needs len(mass) * min_count <= n."""
+    extra = n - len(mass) * min_count
+    share = extra * mass / mass.sum()
+    counts = np.floor(share).astype(np.intp)
+    left = extra - int(counts.sum())
+    counts[np.argsort(-(share - counts), kind="stable")[:left]] += 1
+    return counts + min_count
+
+
+def resample_within(
+    weights: NDArray,
+    labels: NDArray[np.intp],
+    resampler: Resampler,
+    rng: np.random.Generator,
+    *,
+    min_count: int,
+    min_mass: float,
+    max_modes: int,
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """Resample each mode on its own (mixture tracking, `rafostrack.clusters`): N ancestor
+    indices and their normalised weights, mass(mode) / count(mode) for each of a mode's
+    particles. Modes (labelled 0, 1, ... by decreasing mass) lighter than `min_mass` of the
+    total are dropped, as are all but the `max_modes` heaviest; each kept mode gets at
+    least `min_count` particles (`allocate`), so a light mode is not thinned out by chance.
+    """
+    n = len(weights)
+    mass = np.bincount(labels, weights=weights)
+    kept = min(int(np.sum(mass >= min_mass * mass.sum())), max_modes, n // min_count)
+    kept = max(kept, 1)
+    counts = allocate(mass[:kept], n, min_count)
+    ancestors, new_weights = [], []
+    for mode, count in enumerate(counts):
+        members = np.flatnonzero(labels == mode)
+        w = weights[members] / mass[mode]
+        ancestors.append(members[resampler(w, rng, int(count))])
+        new_weights.append(np.full(int(count), mass[mode] / count))
+    out = np.concatenate(new_weights)
+    return np.concatenate(ancestors), out / out.sum()

@@ -7,7 +7,9 @@ phenomenon an independent knob of `StressConfig`, intensities drawn per float or
 
 - geometry: the real DIMES array (all 12 sources, March-October 2010) or the real Weddell
   Sea array (the 11 sources active April-November 2008, with their real offsets and clock
-  drifts); floats launched where at least 3 sources are within 900 km;
+  drifts); floats launched where at least 3 sources are within 900 km, and drawn again if
+  their drift leaves the array (`min_covered_fraction`: fewer than 3 sources within their
+  half-detection range on more than 10% of days);
 - drift: a meandering zonal jet (core speed and sign per geometry), a field of coherent
   rotating eddies drifting with it (a float near one loops around it for weeks), and
   small-scale OU velocity noise; integrated hourly (second-order Runge-Kutta);
@@ -56,7 +58,8 @@ from .io.atomic import write_text_atomic
 
 DAY_NS = np.timedelta64(86400, "s").astype("timedelta64[ns]")
 TOA_DECIMALS = 2
-DEFAULT_SOUND_SPEED_M_S = 1480.0  # the tracker's default: the truth differs from it
+DEFAULT_SOUND_SPEED_M_S = 1480.0
+MAX_DRAWS = 200  # the tracker's default: the truth differs from it
 
 
 @dataclass(frozen=True)
@@ -122,6 +125,11 @@ class StressConfig:
     toa_sd_s: tuple[float, float] = (1.5, 3.0)
     heavy_tails: bool = True
     burst_prob: float = 0.03
+    # Coverage: a float whose drift leaves the array (fewer than 3 sources within their
+    # half-detection range on more than 1 - this fraction of days) is drawn again. Where no
+    # source can be heard the data cannot hold a track, whatever the tracker; 0 keeps every
+    # float (the tracker then marks such stretches `unsupported`).
+    min_covered_fraction: float = 0.9
 
 
 @dataclass(frozen=True)
@@ -260,6 +268,12 @@ def simulate_track(
 # Arrivals
 
 
+def covered_fraction(truth: pd.DataFrame, beacons: BeaconTable, range_km: NDArray[np.float64]) -> float:
+    """Fraction of the truth's days with at least 3 sources within `range_km` (per beacon)."""
+    r = range_m(truth["lat"].to_numpy()[:, None], truth["lon"].to_numpy()[:, None], beacons.lat, beacons.lon)
+    return float(np.mean((r / 1e3 < range_km[None, :]).sum(axis=1) >= 3))
+
+
 def _window_days(cfg: StressConfig, rng: np.random.Generator) -> tuple[NDArray[np.int64], list[list[int]]]:
     """Days (1..days) with a window, after gaps and missing days; and the gaps as day lists."""
     days = np.arange(1, cfg.days + 1)
@@ -280,16 +294,22 @@ def simulate_float(
 ) -> StressFloat:
     """One float: launch, drift, events, then its windows in time order."""
     start = np.datetime64(geometry.start, "D").astype("datetime64[ns]")
-    launch = _launch_position(beacons, rng)
     all_times = start + DAY_NS * np.arange(cfg.days + 1)
-    truth, eddies = simulate_track(launch, all_times, geometry, cfg, rng)
     n_b = len(beacons)
-    # Per-float and per-beacon properties, drawn in this order.
-    toa_sd = rng.uniform(*cfg.toa_sd_s)
-    mp_frac = rng.uniform(*cfg.multipath_fraction) if cfg.multipath else 0.0
-    p_max = rng.uniform(*cfg.p_detect, n_b) if cfg.fading else np.full(n_b, 0.9)
-    r50 = rng.uniform(*cfg.range_km, n_b) if cfg.fading else np.full(n_b, 1e5)
-    width = rng.uniform(*cfg.falloff_km, n_b)
+    for _ in range(MAX_DRAWS):  # until the drift stays inside the array (`StressConfig.min_covered_fraction`)
+        launch = _launch_position(beacons, rng)
+        truth, eddies = simulate_track(launch, all_times, geometry, cfg, rng)
+        # Per-float and per-beacon properties, drawn in this order.
+        toa_sd = rng.uniform(*cfg.toa_sd_s)
+        mp_frac = rng.uniform(*cfg.multipath_fraction) if cfg.multipath else 0.0
+        p_max = rng.uniform(*cfg.p_detect, n_b) if cfg.fading else np.full(n_b, 0.9)
+        r50 = rng.uniform(*cfg.range_km, n_b) if cfg.fading else np.full(n_b, 1e5)
+        width = rng.uniform(*cfg.falloff_km, n_b)
+        covered = covered_fraction(truth, beacons, np.minimum(r50, cfg.range_km[1]))
+        if covered >= cfg.min_covered_fraction:
+            break
+    else:
+        raise RuntimeError(f"{float_id}: no drift inside the array after {MAX_DRAWS} draws")
     spread = rng.normal(0.0, cfg.beacon_sound_speed_sd_m_s, n_b)
     if cfg.sound_speed_mismatch:
         c_beacon = geometry.sound_speed_m_s + spread
@@ -366,6 +386,7 @@ def simulate_float(
         "clutter_rate": cfg.clutter_rate,
         "gaps_days": gaps,
         "outages": [{"beacon": str(ids[i]), "days": [a, b]} for i, a, b in outages],
+        "covered_fraction": round(covered, 3),
         "clock_wander_s": round(float(wander_amp), 3),
         "clock_wander": {"period_days": round(float(wander_period), 4), "phase": round(float(wander_phase), 6)},
         "beacons": {

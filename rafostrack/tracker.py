@@ -101,7 +101,12 @@ class Tracker:
             motion=_motion(config),
             arrivals=arrivals_from_config(beacons, info, config),
             settings=FilterSettings(
-                config.filter.particles, config.filter.resample_ess_fraction, RESAMPLERS[config.filter.resampling]
+                config.filter.particles,
+                config.filter.resample_ess_fraction,
+                RESAMPLERS[config.filter.resampling],
+                config.filter.mode_link_km,
+                config.filter.max_modes,
+                config.filter.min_mode_mass,
             ),
             launch_sd_km=config.fixes.launch_sd_km,
             end_fix=PositionFix(info.end_time, info.end_lat, info.end_lon, config.fixes.end_sd_km) if use_end else None,

@@ -1,18 +1,19 @@
 """Calibration: the nuisances of real data, estimated from the record itself.
 
 Real records do not match the configured model: the effective sound speed differs by a few
-m/s (3-4 s of arrival time at 800 km), source and float clocks wander, each source is heard
-to its own range, multipath delays some arrivals, clutter and noise levels vary. A first
-tracking pass with robust defaults gives positions and labels; from its confident part
-(labels of probability >= 0.9, in windows whose posterior sd is small and single-moded):
+m/s (3-4 s of arrival time at 800 km), source clocks drift from their catalogue values,
+the float clock wanders, each source is heard to its own range, multipath delays some
+arrivals, clutter and noise levels vary, and the float's drift is the ocean's. A first
+tracking pass with robust settings gives positions and labels; from its confident labels:
 
-- `timing.fit_timing`: the shared effective sound speed, each beacon's own sound speed,
-  offset and drift corrections, and a smooth float-clock residual, jointly with small
-  position changes (a robust, regularised bundle adjustment);
-- `noise.fit_toa_noise`: TOA noise sd, multipath fraction and delay (maximum likelihood);
+- `kalman.fit`: a batch Kalman smoother of the track with the float clock's residual and
+  the timing parameters in the state (shared and per-source sound speed, source offset and
+  drift corrections, the mean current), its hyperparameters (eddy velocity sd and time
+  scale, TOA noise sd, clock wander) by maximum marginal likelihood and multipath by EM
+  (`noise.fit_multipath`); it also gives the position variance those nuisances leave
+  undetermined, which the tracker adds to its own;
 - `noise.fit_clutter_rate`: clutter signals per window;
-- `detection.fit_detection`: each beacon's peak detection probability and half range;
-- `drift.fit_drift`: mean current, eddy velocity sd and decorrelation time of the drift.
+- `detection.fit_detection`: each beacon's peak detection probability and half range.
 
 The second pass tracks with these values (`Calibration.apply`). A value the user set in a
 config file or flag is kept as set, not estimated; every estimate is reported in run.json.
@@ -29,16 +30,15 @@ from numpy.typing import NDArray
 
 from .. import model as m
 from ..config import Config, with_overrides
-from ..domain import ArrivalRecord, BeaconTable, FloatInfo
+from ..domain import ArrivalRecord, BeaconTable, FloatInfo, elapsed_days
 from ..estimates import Estimate
+from . import kalman
 from .detection import fit_detection
-from .drift import fit_drift
-from .noise import fit_clutter_rate
-from .timing import Arrivals, TimingFit, fit_timing
+from .noise import direct_probability, fit_clutter_rate, fit_multipath
 
 MIN_ARRIVALS = 60  # fewer confident arrivals than this: no calibration
 CONFIDENT_PROB = 0.9
-MAX_SD_KM = 8.0
+INITIAL_CLOCK_SD_S_PER_SQRT_DAY = 0.05
 
 # The config keys calibration may set, (section, key).
 CALIBRATED_KEYS = (
@@ -51,17 +51,21 @@ CALIBRATED_KEYS = (
     ("motion", "mean_current_north_km_per_day"),
     ("motion", "velocity_sd_km_per_day"),
     ("motion", "decorrelation_days"),
+    ("motion", "diffusion_km_per_day"),
 )
 
 
 @dataclass(frozen=True)
 class Calibration:
-    """Estimated values: config keys, the beacon table and float with their corrections."""
+    """Estimated values: config keys, the beacon table and float with their corrections, and
+    the position covariance the nuisances leave undetermined at each node time."""
 
     values: dict[tuple[str, str], float]
     beacons: BeaconTable
     info: FloatInfo
     report: dict[str, Any] = field(default_factory=dict)
+    nuisance_time: NDArray[np.datetime64] = field(default_factory=lambda: np.zeros(0, "datetime64[ns]"))
+    nuisance_cov_km2: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2, 2)))
 
     def apply(self, config: Config) -> Config:
         """`config` with the estimated keys set."""
@@ -70,53 +74,77 @@ class Calibration:
             layer.setdefault(section, {})[key] = value
         return with_overrides(config, **layer) if layer else config
 
+    def nuisance_cov_at(self, times: NDArray[np.datetime64]) -> NDArray[np.float64]:
+        """(n, 2, 2) nuisance covariance at `times`, from the nearest node."""
+        if len(self.nuisance_time) == 0:
+            return np.zeros((len(times), 2, 2))
+        t = np.asarray(times, dtype="datetime64[ns]").astype(np.int64)
+        nodes = self.nuisance_time.astype("datetime64[ns]").astype(np.int64)
+        right = np.clip(np.searchsorted(nodes, t), 1, len(nodes) - 1) if len(nodes) > 1 else np.zeros(len(t), int)
+        left = np.maximum(right - 1, 0)
+        nearest = np.where(np.abs(nodes[left] - t) <= np.abs(nodes[right] - t), left, right)
+        return self.nuisance_cov_km2[nearest]
 
-def _confident_arrivals(estimate: Estimate, beacons: BeaconTable, info: FloatInfo, config: Config) -> Arrivals | None:
-    """Arrivals labelled with probability >= CONFIDENT_PROB in windows with a small,
-    single-moded posterior, and the GPS fixes (launch, and end if used) as windows without
-    arrivals: they anchor the track, and with it the scale of the ranges (sound speed)."""
+
+def _problem(
+    estimate: Estimate, beacons: BeaconTable, info: FloatInfo, config: Config
+) -> tuple[kalman.Problem, NDArray[np.intp], NDArray[np.float64]] | None:
+    """The smoother's problem from a first pass's confident labels (`CONFIDENT_PROB`, not in
+    ambiguous windows): nodes at the launch, the labelled windows and the end fix, nominal
+    positions from the first pass; the heard beacons' table rows and drift references."""
     labels, track = estimate.labels, estimate.track
-    good = track[(track["sd_km"] <= MAX_SD_KM) & ~track["ambiguous"]]
-    sure = labels[labels["beacon_id"].notna() & (labels["prob"] >= CONFIDENT_PROB)]
-    sure = sure[sure["time"].isin(good["time"])]
+    clear = track.loc[~track["ambiguous"], "time"]
+    sure = labels[labels["beacon_id"].notna() & (labels["prob"] >= CONFIDENT_PROB) & labels["time"].isin(clear)]
     if len(sure) < MIN_ARRIVALS:
         return None
-    windows = good.set_index("time").loc[sorted(sure["time"].unique())]
-    times = windows.index.to_numpy(dtype="datetime64[ns]")
-    lat, lon, sd = (windows[c].to_numpy(dtype=float) for c in ("lat", "lon", "sd_km"))
-    fixes = [(info.launch_time, info.launch_lat, info.launch_lon, config.fixes.launch_sd_km)]
+    positions = track.set_index("time")
+    window_t = np.unique(sure["time"].to_numpy(dtype="datetime64[ns]"))
+    launch_t = np.datetime64(info.launch_time, "ns")
+    times = [launch_t, *window_t[window_t > launch_t]]
+    lat = [info.launch_lat, *positions.loc[times[1:], "lat"].to_numpy()]
+    lon = [info.launch_lon, *positions.loc[times[1:], "lon"].to_numpy()]
+    end_sd = None
     if config.fixes.use_end_fix and info.has_end_fix:
-        fixes.append((info.end_time, info.end_lat, info.end_lon, config.fixes.end_sd_km))
-    fix_t = np.array([f[0] for f in fixes], dtype="datetime64[ns]")
-    keep = ~np.isin(times, fix_t)
-    times = np.concatenate([times[keep], fix_t])
-    order = np.argsort(times, kind="stable")
-    lat = np.concatenate([lat[keep], [f[1] for f in fixes]])[order]
-    lon = np.concatenate([lon[keep], [f[2] for f in fixes]])[order]
-    sd = np.concatenate([sd[keep], [f[3] for f in fixes]])[order]
-    anchored = np.concatenate([np.zeros(keep.sum(), bool), np.ones(len(fixes), bool)])[order]
-    times = times[order]
+        end_t = np.datetime64(info.end_time, "ns")
+        if end_t <= times[-1]:  # a window at the end time: its node is the end fix's
+            times, lat, lon = times[:-1], lat[:-1], lon[:-1]
+        times.append(end_t)
+        lat.append(info.end_lat)
+        lon.append(info.end_lon)
+        end_sd = config.fixes.end_sd_km
+    node_time = np.array(times, dtype="datetime64[ns]")
+    arr_t = sure["time"].to_numpy(dtype="datetime64[ns]")
     row_of = beacons.index_of()
-    return Arrivals(
-        window=np.searchsorted(times, sure["time"].to_numpy(dtype="datetime64[ns]")),
-        beacon=np.array([row_of[b] for b in sure["beacon_id"]], dtype=np.intp),
+    rows = np.array([row_of[b] for b in sure["beacon_id"]], dtype=np.intp)
+    heard, beacon = np.unique(rows, return_inverse=True)
+    epoch = np.where(np.isnat(beacons.start[rows]), info.launch_time, beacons.start[rows])
+    days = elapsed_days(arr_t, epoch)
+    mid = np.array([days[beacon == h].mean() for h in range(len(heard))])
+    problem = kalman.Problem(
+        time=node_time,
+        lat=np.array(lat, dtype=float),
+        lon=np.array(lon, dtype=float),
+        launch_sd_km=config.fixes.launch_sd_km,
+        end_sd_km=end_sd,
+        node=np.searchsorted(node_time, arr_t),
+        beacon=beacon,
         toa_s=sure["toa_s"].to_numpy(dtype=float),
-        time=times,
-        lat=lat,
-        lon=lon,
-        sd_km=sd,
-        anchored=anchored,
+        delay_s=beacons.offset_s[rows] + beacons.drift_s_per_day[rows] * days + info.clock_offset_s(arr_t),
+        drift_days=days - mid[beacon],
+        beacon_lat=beacons.lat[heard],
+        beacon_lon=beacons.lon[heard],
+        slowness_s_per_m=1.0 / config.model.sound_speed_m_s,
     )
+    return problem, heard, mid
 
 
-def _corrected_beacons(beacons: BeaconTable, fit: TimingFit, keep_speeds: bool) -> BeaconTable:
-    speeds = beacons.sound_speed_m_s if keep_speeds else np.where(fit.heard, fit.beacon_sound_speed_m_s, np.nan)
-    return dataclasses.replace(
-        beacons,
-        offset_s=beacons.offset_s + fit.offset_s,
-        drift_s_per_day=beacons.drift_s_per_day + fit.drift_s_per_day,
-        sound_speed_m_s=speeds,
-    )
+def _corrected_beacons(beacons: BeaconTable, heard: NDArray[np.intp], fit: kalman.KalmanFit) -> BeaconTable:
+    offset, drift = beacons.offset_s.copy(), beacons.drift_s_per_day.copy()
+    offset[heard] += fit.offset_s
+    drift[heard] += fit.drift_s_per_day
+    speeds = np.full(len(beacons), np.nan) if beacons.sound_speed_m_s is None else beacons.sound_speed_m_s.copy()
+    speeds[heard] = fit.beacon_sound_speed_m_s
+    return dataclasses.replace(beacons, offset_s=offset, drift_s_per_day=drift, sound_speed_m_s=speeds)
 
 
 def _detection(
@@ -171,57 +199,70 @@ def calibrate(
 ) -> Calibration | None:
     """Estimate the record's nuisances from a first pass's `estimate` (module docstring);
     None when it has too few confident arrivals. Keys in `explicit` keep their values."""
-    model = config.model
-    arrivals = _confident_arrivals(estimate, beacons, info, config)
-    if arrivals is None:
+    built = _problem(estimate, beacons, info, config)
+    if built is None:
         return None
-    fit, noise = fit_timing(arrivals, beacons, info, model, fix_sound_speed=("model", "sound_speed_m_s") in explicit)
-    sigma, eps, tau = noise.toa_sigma_s, noise.multipath_fraction, noise.multipath_delay_s
+    problem, heard, mid = built
+    model = config.model
+    noise = {"model": model}
+
+    def weight_of(residual_s: NDArray, toa_sigma_s: float) -> NDArray:
+        eps, tau = fit_multipath(residual_s, toa_sigma_s, noise["model"])
+        noise["model"] = dataclasses.replace(
+            noise["model"], toa_sigma_s=toa_sigma_s, multipath_fraction=eps, multipath_delay_s=tau
+        )
+        return direct_probability(residual_s, noise["model"])
+
+    motion = config.motion
+    start = kalman.Hyper(
+        motion.velocity_sd_km_per_day, motion.decorrelation_days, model.toa_sigma_s, INITIAL_CLOCK_SD_S_PER_SQRT_DAY
+    )
+    fit = kalman.fit(problem, start, weight_of, mid)
+    fitted = noise["model"]
     clutter = fit_clutter_rate(estimate.labels["p_clutter"].to_numpy(dtype=float), record, info)
+    hyper = fit.hyper
     values: dict[tuple[str, str], float] = {
         ("model", "sound_speed_m_s"): round(fit.sound_speed_m_s, 2),
-        ("model", "toa_sigma_s"): round(sigma, 3),
-        ("model", "multipath_fraction"): round(eps, 4),
-        ("model", "multipath_delay_s"): round(tau, 2),
+        ("model", "toa_sigma_s"): round(hyper.toa_sigma_s, 3),
+        ("model", "multipath_fraction"): round(max(fitted.multipath_fraction, 1e-3), 4),
+        ("model", "multipath_delay_s"): round(fitted.multipath_delay_s, 2),
         ("model", "clutter_rate"): round(max(clutter, 0.05), 3),
+        ("motion", "mean_current_east_km_per_day"): round(float(fit.mean_current_km_per_day[0]), 3),
+        ("motion", "mean_current_north_km_per_day"): round(float(fit.mean_current_km_per_day[1]), 3),
+        ("motion", "velocity_sd_km_per_day"): round(hyper.velocity_sd_km_per_day, 3),
+        ("motion", "decorrelation_days"): round(hyper.decorrelation_days, 2),
+        # The random walk with the same long-time spread: D^2 = 2 sigma_v^2 T per axis per day.
+        ("motion", "diffusion_km_per_day"): round(hyper.velocity_sd_km_per_day * np.sqrt(2 * hyper.decorrelation_days), 3),
     }
-    drift = fit_drift(fit.track)  # the fitted track: smooth, and corrected for the timing errors
-    if drift is not None:
-        mean, sd, timescale = drift
-        values |= {
-            ("motion", "mean_current_east_km_per_day"): round(float(mean[0]), 3),
-            ("motion", "mean_current_north_km_per_day"): round(float(mean[1]), 3),
-            ("motion", "velocity_sd_km_per_day"): round(sd, 3),
-            ("motion", "decorrelation_days"): round(timescale, 2),
-        }
     values = {k: v for k, v in values.items() if k not in explicit}
-    keep_speeds = ("model", "sound_speed_m_s") in explicit or beacons.sound_speed_m_s is not None
-    corrected = _corrected_beacons(beacons, fit, keep_speeds)
+    corrected = _corrected_beacons(beacons, heard, fit)
     fitted_model = with_overrides(config, model={k: v for (s, k), v in values.items() if s == "model"}).model
-    p, r50, detection_report = _detection(estimate, record, corrected, info, fitted_model)
+    clocked = dataclasses.replace(info, clock_residual=(problem.time, fit.clock_s))
+    p, r50, detection_report = _detection(estimate, record, corrected, clocked, fitted_model)
     if beacons.p_detect is None and beacons.detection_range_km is None:
         corrected = dataclasses.replace(corrected, p_detect=p, detection_range_km=r50)
-    clocked = dataclasses.replace(info, clock_residual=(fit.clock_knots, fit.clock_s))
     ids = [str(b) for b in beacons.beacon_id]
+    direct = fit.weight > 0.5
     report = {
-        "arrivals_used": len(arrivals.toa_s),
-        "windows_used": len(arrivals.time),
-        "residual_rms_s": round(float(np.sqrt(np.mean(np.clip(fit.residual_s, -30, 30) ** 2))), 3),
+        "arrivals_used": len(problem.toa_s),
+        "windows_used": int(np.unique(problem.node).size),
+        "residual_rms_s": round(float(np.sqrt(np.mean(fit.toa_residual_s[direct] ** 2))), 3),
+        "clock_wander_s_per_sqrt_day": round(hyper.clock_sd_s_per_sqrt_day, 4),
+        "log_evidence": round(fit.log_evidence, 2),
         "values": {f"[{s}] {k}": v for (s, k), v in values.items()},
         "kept_as_configured": sorted(f"[{s}] {k}" for s, k in explicit if (s, k) in CALIBRATED_KEYS),
         "beacons": {
             ids[i]: {
-                "offset_correction_s": round(float(fit.offset_s[i]), 3),
-                "drift_correction_s_per_day": round(float(fit.drift_s_per_day[i]), 5),
-                "sound_speed_m_s": round(float(fit.beacon_sound_speed_m_s[i]), 2),
+                "offset_correction_s": round(float(fit.offset_s[h]), 3),
+                "drift_correction_s_per_day": round(float(fit.drift_s_per_day[h]), 5),
+                "sound_speed_m_s": round(float(fit.beacon_sound_speed_m_s[h]), 2),
                 **detection_report.get(ids[i], {}),
             }
-            for i in range(len(ids))
-            if fit.heard[i]
+            for h, i in enumerate(heard)
         },
-        "clock_residual_s": {
-            "max_abs": round(float(np.abs(fit.clock_s).max()), 3),
-            "knots": len(fit.clock_s),
+        "clock_residual_s": {"max_abs": round(float(np.abs(fit.clock_s).max()), 3), "nodes": len(fit.clock_s)},
+        "nuisance_sd_km": {
+            "median": round(float(np.median(np.sqrt(np.trace(fit.nuisance_cov_km2, axis1=1, axis2=2)))), 3)
         },
     }
-    return Calibration(values, corrected, clocked, report)
+    return Calibration(values, corrected, clocked, report, problem.time, fit.nuisance_cov_km2)

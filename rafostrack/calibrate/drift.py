@@ -69,8 +69,8 @@ def fit_drift(track: pd.DataFrame) -> tuple[NDArray[np.float64], float, float] |
         model = sigma**2 * _structure(lag / timescale) + 2.0 * err**2 / lag**2
         return weight * (np.log(model) - np.log(var))
 
-    fit = least_squares(
-        residual, np.log([np.sqrt(var[0]), 5.0, 1.0]), bounds=(np.log([1.0, 2.0, 0.01]), np.log([20.0, 30.0, 20.0]))
-    )
+    lower, upper = np.array([1.0, 2.0, 0.01]), np.array([20.0, 30.0, 20.0])
+    start = np.clip([np.sqrt(var[0]), 5.0, 1.0], lower * 1.001, upper * 0.999)  # inside the bounds
+    fit = least_squares(residual, np.log(start), bounds=(np.log(lower), np.log(upper)))
     sigma, timescale, _ = np.exp(fit.x)
     return mean, float(sigma), float(timescale)

@@ -53,6 +53,36 @@ def fit_toa_noise(residual_s: NDArray, model: ModelConfig) -> tuple[float, float
     return fitted.toa_sigma_s, fitted.multipath_fraction, fitted.multipath_delay_s
 
 
+def fit_multipath(residual_s: NDArray, toa_sigma_s: float, model: ModelConfig) -> tuple[float, float]:
+    """(eps, tau) maximising sum log f(r) with sigma fixed at `toa_sigma_s` (the EM step
+    of the timing fit: sigma itself comes from the marginal likelihood); bounds as in
+    `fit_toa_noise`."""
+    r = np.clip(np.asarray(residual_s, dtype=float), -300.0, 300.0)
+
+    def unpack(p: NDArray) -> ModelConfig:
+        return dataclasses.replace(
+            model,
+            toa_sigma_s=toa_sigma_s,
+            multipath_fraction=float(np.clip(expit(p[0]), 1e-4, 0.3)),
+            multipath_delay_s=float(np.clip(np.exp(p[1]), 8.0, 200.0)),
+        )
+
+    def cost(p: NDArray) -> float:
+        return -float(np.sum(toa_logpdf(r, unpack(p))))
+
+    start = np.array([logit(min(max(model.multipath_fraction, 0.02), 0.5)), np.log(model.multipath_delay_s)])
+    best = minimize(cost, start, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6, "maxiter": 1000})
+    fitted = unpack(best.x)
+    return fitted.multipath_fraction, fitted.multipath_delay_s
+
+
+def direct_probability(residual_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
+    """P(an arrival came by the direct path | its residual): the Gaussian component's share
+    of the error density, (1 - eps) N(r; 0, sigma^2) / f(r)."""
+    direct = dataclasses.replace(model, multipath_fraction=0.0)
+    return np.exp(np.log1p(-model.multipath_fraction) + toa_logpdf(residual_s, direct) - toa_logpdf(residual_s, model))
+
+
 def fit_clutter_rate(p_clutter: NDArray, record: ArrivalRecord, info: FloatInfo) -> float:
     """Clutter signals per window (module docstring), from every stored TOA's clutter
     probability `p_clutter`."""

@@ -28,28 +28,26 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ..config import MotionConfig
 from .base import LinearGaussian, MotionModel
 
 
-def ou_axis_moments(dt_days: float, sd: float, timescale: float) -> tuple[float, float, float, float]:
-    """(a, Var e_x, Cov(e_x, e_v), Var e_v) of one axis over `dt_days` (module docstring).
+def ou_axis_moments(dt_days: ArrayLike, sd: float, timescale: float) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(a, Var e_x, Cov(e_x, e_v), Var e_v) of one axis over `dt_days` (module docstring),
+    elementwise for an array of intervals.
 
     Var e_x is computed as sigma^2 T^2 (2 d - 3 + 4 a - a^2) with d = D / T, written as
     2 sigma^2 T^2 (d - 2 (1 - a) + (1 - a^2) / 2) using expm1 so that it stays accurate
     (non-negative, ~ 2 sigma^2 D^3 / (3 T)) for D << T.
     """
-    d = max(dt_days, 0.0) / timescale
-    one_minus_a = -math.expm1(-d)
+    d = np.maximum(np.asarray(dt_days, dtype=float), 0.0) / timescale
+    one_minus_a = -np.expm1(-d)
     a = 1.0 - one_minus_a
     # 2 d - 3 + 4 a - a^2 = 2 (d - one_minus_a) - one_minus_a^2 ; d - (1 - e^-d) by series when small.
-    if d < 1e-3:
-        d_minus = d * d / 2.0 - d**3 / 6.0 + d**4 / 24.0
-    else:
-        d_minus = d - one_minus_a
-    var_x = sd * sd * timescale * timescale * max(2.0 * d_minus - one_minus_a * one_minus_a, 0.0)
+    d_minus = np.where(d < 1e-3, d * d / 2.0 - d**3 / 6.0 + d**4 / 24.0, d - one_minus_a)
+    var_x = sd * sd * timescale * timescale * np.maximum(2.0 * d_minus - one_minus_a * one_minus_a, 0.0)
     cov_xv = sd * sd * timescale * one_minus_a * one_minus_a
     var_v = sd * sd * one_minus_a * (1.0 + a)
     return a, var_x, cov_xv, var_v
@@ -85,7 +83,7 @@ class IntegratedOU(MotionModel):
         """State (east, north, v_east, v_north); the Cholesky factor per axis in closed form."""
         t = self.decorrelation_days
         dt = max(dt_days, 0.0)
-        a, var_x, cov_xv, var_v = ou_axis_moments(dt, self.velocity_sd_km_per_day, t)
+        a, var_x, cov_xv, var_v = (float(x) for x in ou_axis_moments(dt, self.velocity_sd_km_per_day, t))
         vbar = np.asarray(self.mean_current_km_per_day, dtype=float)
         i2 = np.eye(2)
         A = np.block([[i2, t * (1.0 - a) * i2], [np.zeros((2, 2)), a * i2]])

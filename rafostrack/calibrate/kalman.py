@@ -1,0 +1,459 @@
+"""The record's nuisances by a batch Kalman smoother: track, float clock and timing jointly.
+
+Given arrivals whose source is known (the confident labels of a first pass), the float's
+track and the parameters that shift arrival times form a linear-Gaussian state-space
+model once the ranges are linearised about a nominal track (Chamberlain et al. 2023, RAFOS
+tracking by Kalman smoothing, with the timing parameters in the state). Nodes k are the
+launch, every window with labelled arrivals and the end fix; each carries
+
+    s_k = (p_k, v_k, c_k): position offset from the nominal track (east/north km, in the
+          nominal point's tangent plane), velocity (km/day) and the float-clock residual
+          beyond the linear launch-to-end clock model (s),
+
+with the motion of `motion.IntegratedOU` between nodes (the exact transition over the
+interval: velocity sd sigma_v, decorrelation time T, mean current vbar) and a random walk
+for the clock, c_{k+1} = c_k + N(0, q^2 dt). Static parameters theta: the mean current
+vbar, the shared slowness deviation ds (1 / sound speed), and per heard beacon i an offset
+a_i, a drift d_i (about the middle of its arrivals) and its own slowness deviation ds_i.
+An arrival of beacon i at node k, its catalogue delay D (offset, drift, linear clock),
+
+    T = D + a_i + d_i (days_i - mid_i) + c_k + R(p_k, b_i) (s0 + ds + ds_i) + e,
+    e ~ N(0, sigma^2 / w),   w = P(direct path | residual)  (multipath, by EM),
+
+and the fixes: p at launch ~ N(0, launch sd^2), p at the end observed with the end fix's
+sd, the clock residual ~ N(0, 0.5 s) at both ends (where the clock was measured).
+
+Every term is a whitened row of one sparse least-squares problem in all the unknowns
+(the information form of the Kalman smoother: its solution is the RTS smoother's mean);
+Gauss-Newton re-linearises the ranges. The hyperparameters h = (sigma_v, T, sigma, q) are
+those maximising the marginal likelihood of the linearised model,
+
+    log p(y | h) = -|r*|^2 / 2 - log|J'J| / 2 + sum log|W| - (n_data / 2) log 2 pi,
+
+(r* the whitened residuals at the solution, J their Jacobian, W the rows' whitening), which
+counts the parameters that the fit spends, unlike the residuals' own spread.
+
+The posterior covariance also says what the nuisances leave undetermined: the position
+variance that comes from the uncertain clock and timing parameters (law of total variance,
+`nuisance_cov_km2`) is [N^-1]_pp - [N_xx^-1]_pp, N = J'J and N_xx its block of positions and
+velocities. A particle filter run with the fitted values does not see it; the tracker adds
+it to the filter's covariance.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+from scipy import sparse
+from scipy.optimize import minimize
+
+from ..domain import elapsed_days
+from ..geodesy import displace, local_offsets_km, range_m
+from ..motion.ou import ou_axis_moments
+from .banded import BorderedBanded
+
+NODE = 5  # unknowns per node: east, north, v_east, v_north, clock
+LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+@dataclass(frozen=True)
+class KalmanPriors:
+    """Prior sds of the static parameters and of the clock where it was measured."""
+
+    sound_speed_m_s: float = 20.0
+    beacon_sound_speed_m_s: float = 2.0
+    offset_s: float = 3.0
+    drift_s_per_day: float = 0.01
+    clock_fix_s: float = 0.5
+    mean_current_km_per_day: float = 20.0
+
+
+@dataclass(frozen=True)
+class Hyper:
+    """The smoother's hyperparameters (fitted by maximum marginal likelihood)."""
+
+    velocity_sd_km_per_day: float
+    decorrelation_days: float
+    toa_sigma_s: float
+    clock_sd_s_per_sqrt_day: float
+
+    # Bounds of the search, per field (a shorter time scale than a day cannot be told from
+    # position errors by daily windows).
+    LOWER = (0.3, 0.5, 0.2, 1e-3)
+    UPPER = (40.0, 60.0, 20.0, 2.0)
+
+    def vector(self) -> NDArray[np.float64]:
+        return np.log(dataclasses.astuple(self))
+
+    @classmethod
+    def from_vector(cls, x: NDArray) -> Hyper:
+        return cls(*np.clip(np.exp(x), cls.LOWER, cls.UPPER).tolist())
+
+
+@dataclass(frozen=True)
+class Problem:
+    """What the smoother fits: the nodes (times, nominal positions, fixes) and the arrivals."""
+
+    time: NDArray[np.datetime64]  # (K,) node times, ascending
+    lat: NDArray[np.float64]  # (K,) nominal positions
+    lon: NDArray[np.float64]
+    launch_sd_km: float
+    end_sd_km: float | None  # the last node is the end fix when given
+    node: NDArray[np.intp]  # (J,) node of each arrival
+    beacon: NDArray[np.intp]  # (J,) index among the heard beacons
+    toa_s: NDArray[np.float64]
+    delay_s: NDArray[np.float64]  # (J,) catalogue offset + drift + linear clock
+    drift_days: NDArray[np.float64]  # (J,) days since the beacon's epoch, minus its mid-record value
+    beacon_lat: NDArray[np.float64]  # (H,) heard beacons
+    beacon_lon: NDArray[np.float64]
+    slowness_s_per_m: float  # s0 = 1 / configured sound speed
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.time)
+
+    @property
+    def n_heard(self) -> int:
+        return len(self.beacon_lat)
+
+    @property
+    def n_unknowns(self) -> int:
+        return NODE * self.n_nodes + 3 + 3 * self.n_heard
+
+    # Static unknowns: vbar (2), ds, then a_i, d_i, ds_i per heard beacon.
+    def static(self, name: str) -> int | NDArray[np.intp]:
+        base = NODE * self.n_nodes
+        h = np.arange(self.n_heard)
+        return {"vbar": base, "ds": base + 2, "a": base + 3 + h, "d": base + 3 + self.n_heard + h,
+                "dsi": base + 3 + 2 * self.n_heard + h}[name]  # fmt: skip
+
+
+@dataclass
+class Rows:
+    """Whitened residual rows r(u) with their sparse Jacobian, and log|W| of the whitening."""
+
+    rows: list[NDArray] = dataclasses.field(default_factory=list)
+    cols: list[NDArray] = dataclasses.field(default_factory=list)
+    vals: list[NDArray] = dataclasses.field(default_factory=list)
+    residual: list[NDArray] = dataclasses.field(default_factory=list)
+    log_whitening: float = 0.0
+    n: int = 0
+
+    def add(self, residual: NDArray, entries: list[tuple[NDArray, NDArray]], log_whitening: float) -> None:
+        """Rows with whitened residuals `residual` (m,) and Jacobian entries, each a pair
+        (columns (m,), values (m,)): one nonzero per row per pair."""
+        m = len(residual)
+        index = self.n + np.arange(m)
+        for col, val in entries:
+            self.rows.append(index)
+            self.cols.append(np.broadcast_to(col, (m,)))
+            self.vals.append(np.broadcast_to(val, (m,)))
+        self.residual.append(residual)
+        self.log_whitening += log_whitening
+        self.n += m
+
+    def system(self, n_unknowns: int) -> tuple[sparse.csr_matrix, NDArray[np.float64]]:
+        jac = sparse.csr_matrix(
+            (np.concatenate(self.vals), (np.concatenate(self.rows), np.concatenate(self.cols))),
+            shape=(self.n, n_unknowns),
+        )
+        return jac, np.concatenate(self.residual)
+
+
+def _positions(problem: Problem, u: NDArray) -> tuple[NDArray, NDArray]:
+    k = np.arange(problem.n_nodes)
+    return displace(problem.lat, problem.lon, u[NODE * k], u[NODE * k + 1])
+
+
+def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> NDArray:
+    """Arrival rows whitened by sqrt(w) only (the 1 / sigma comes with the hyperparameters);
+    returns the residuals (observed - predicted, s)."""
+    k, i = problem.node, problem.beacon
+    lat, lon = _positions(problem, u)
+    at_lat, at_lon = lat[k], lon[k]
+    blat, blon = problem.beacon_lat[i], problem.beacon_lon[i]
+    r = range_m(at_lat, at_lon, blat, blon)
+    step = 0.1  # km, central differences of the range (m per km east / north)
+    grad_e = (range_m(*displace(at_lat, at_lon, step, 0.0), blat, blon)
+              - range_m(*displace(at_lat, at_lon, -step, 0.0), blat, blon)) / (2 * step)  # fmt: skip
+    grad_n = (range_m(*displace(at_lat, at_lon, 0.0, step), blat, blon)
+              - range_m(*displace(at_lat, at_lon, 0.0, -step), blat, blon)) / (2 * step)  # fmt: skip
+    slow = problem.slowness_s_per_m + u[problem.static("ds")] + u[problem.static("dsi")][i]
+    a, d = u[problem.static("a")][i], u[problem.static("d")][i]
+    predicted = problem.delay_s + a + d * problem.drift_days + u[NODE * k + 4] + r * slow
+    scale = np.sqrt(weight)
+    resid = problem.toa_s - predicted
+    rows.add(
+        -scale * resid,  # whitened (predicted - observed)
+        [
+            (NODE * k, scale * grad_e * slow),
+            (NODE * k + 1, scale * grad_n * slow),
+            (NODE * k + 4, scale),
+            (np.asarray(problem.static("ds")), scale * r),
+            (problem.static("dsi")[i], scale * r),
+            (problem.static("a")[i], scale),
+            (problem.static("d")[i], scale * problem.drift_days),
+        ],
+        float(np.sum(np.log(scale))),
+    )
+    return resid
+
+
+def _motion(problem: Problem, u: NDArray, hyper: Hyper, priors: KalmanPriors, rows: Rows) -> None:
+    """The OU transitions (per axis: position and velocity rows, whitened by the 2x2
+    covariance's inverse Cholesky factor), the clock's random walk, and the initial state."""
+    days = elapsed_days(problem.time, problem.time[0])
+    dt = np.diff(days)
+    k = np.arange(problem.n_nodes - 1)
+    # Nominal displacement of node k+1 from node k, in k's tangent plane.
+    east, north = local_offsets_km(problem.lat[1:], problem.lon[1:], problem.lat[:-1], problem.lon[:-1])
+    nominal = (east, north)
+    vbar = problem.static("vbar")
+    sd, t = hyper.velocity_sd_km_per_day, hyper.decorrelation_days
+    a, var_x, cov, var_v = ou_axis_moments(dt, sd, t)
+    # Whitening of (e_x, e_v) per axis: L = chol([[var_x, cov], [cov, var_v]]), W = L^-1.
+    l11 = np.sqrt(np.maximum(var_x, 1e-12))
+    l21 = cov / l11
+    l22 = np.sqrt(np.maximum(var_v - l21 * l21, 1e-12))
+    w11, w21, w22 = 1.0 / l11, -l21 / (l11 * l22), 1.0 / l22
+    one_minus_a = 1.0 - a
+    for axis in range(2):
+        p0, p1 = NODE * k + axis, NODE * (k + 1) + axis
+        v0, v1 = NODE * k + 2 + axis, NODE * (k + 1) + 2 + axis
+        e_x = nominal[axis] + u[p1] - u[p0] - t * one_minus_a * u[v0] - (dt - t * one_minus_a) * u[vbar + axis]
+        e_v = u[v1] - a * u[v0] - one_minus_a * u[vbar + axis]
+        # Row 1: w11 e_x; row 2: w21 e_x + w22 e_v.
+        dx = [(p1, 1.0), (p0, -1.0), (v0, -t * one_minus_a), (vbar + axis, -(dt - t * one_minus_a))]
+        dv = [(v1, 1.0), (v0, -a), (vbar + axis, -one_minus_a)]
+        rows.add(w11 * e_x, [(c, w11 * np.asarray(g)) for c, g in dx], float(np.sum(np.log(w11))))
+        rows.add(
+            w21 * e_x + w22 * e_v,
+            [(c, w21 * np.asarray(g)) for c, g in dx] + [(c, w22 * np.asarray(g)) for c, g in dv],
+            float(np.sum(np.log(w22))),
+        )
+    q = hyper.clock_sd_s_per_sqrt_day * np.sqrt(np.maximum(dt, 1e-6))
+    rows.add((u[NODE * (k + 1) + 4] - u[NODE * k + 4]) / q, [(NODE * (k + 1) + 4, 1 / q), (NODE * k + 4, -1 / q)],
+             -float(np.sum(np.log(q))))  # fmt: skip
+    # Initial state: launch position, velocity about the mean current, clock measured at launch.
+    for axis in range(2):
+        s = problem.launch_sd_km
+        rows.add(np.array([u[axis] / s]), [(np.array([axis]), np.array([1 / s]))], -np.log(s))
+        rows.add(
+            np.array([(u[2 + axis] - u[vbar + axis]) / sd]),
+            [(np.array([2 + axis]), np.array([1 / sd])), (np.array([vbar + axis]), np.array([-1 / sd]))],
+            -np.log(sd),
+        )
+    c = priors.clock_fix_s
+    rows.add(np.array([u[4] / c]), [(np.array([4]), np.array([1 / c]))], -np.log(c))
+
+
+def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> None:
+    """Priors of the static parameters (slowness sds from sound-speed sds: ds = -dc / c^2)."""
+    s0 = problem.slowness_s_per_m
+    for name, sd in (
+        ("vbar", priors.mean_current_km_per_day),
+        ("ds", priors.sound_speed_m_s * s0 * s0),
+        ("a", priors.offset_s),
+        ("d", priors.drift_s_per_day),
+        ("dsi", priors.beacon_sound_speed_m_s * s0 * s0),
+    ):
+        idx = problem.static(name)
+        idx = np.arange(idx, idx + 2) if name == "vbar" else np.atleast_1d(idx)
+        rows.add(u[idx] / sd, [(idx, np.full(len(idx), 1 / sd))], -len(idx) * float(np.log(sd)))
+
+
+def _end_fix(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> int:
+    """The end fix's rows (data): position and clock at the last node. Returns their count."""
+    if problem.end_sd_km is None:
+        return 0
+    last = problem.n_nodes - 1
+    s = problem.end_sd_km
+    for axis in range(2):
+        col = np.array([NODE * last + axis])
+        rows.add(np.array([u[col[0]] / s]), [(col, np.array([1 / s]))], -np.log(s))
+    c = priors.clock_fix_s
+    col = np.array([NODE * last + 4])
+    rows.add(np.array([u[col[0]] / c]), [(col, np.array([1 / c]))], -np.log(c))
+    return 3
+
+
+@dataclass(frozen=True)
+class Normal:
+    """A group of rows reduced to its normal-equation terms: J'J, J'r, r'r and log|W|."""
+
+    jtj: sparse.csr_matrix
+    jtr: NDArray[np.float64]
+    rtr: float
+    log_whitening: float
+
+    @classmethod
+    def of(cls, rows: Rows, n_unknowns: int) -> Normal:
+        jac, r = rows.system(n_unknowns)
+        return cls((jac.T @ jac).tocsr(), jac.T @ r, float(r @ r), rows.log_whitening)
+
+
+@dataclass(frozen=True)
+class Linearised:
+    """The model linearised at one point u. The arrival rows (before their 1 / sigma), the
+    end fix and the static priors do not depend on the hyperparameters: their normal terms
+    are built once, and only the motion rows are rebuilt for each hyperparameter value."""
+
+    problem: Problem
+    u: NDArray[np.float64]
+    arrivals: Normal  # at sigma = 1
+    n_arrivals: int
+    fixed: Normal
+    n_data: int
+    toa_residual_s: NDArray[np.float64]
+    priors: KalmanPriors
+
+    def normal(self, hyper: Hyper) -> Normal:
+        """All rows' normal terms under `hyper`."""
+        rows = Rows()
+        _motion(self.problem, self.u, hyper, self.priors, rows)
+        motion = Normal.of(rows, self.problem.n_unknowns)
+        a, f, s2 = self.arrivals, self.fixed, hyper.toa_sigma_s**2
+        return Normal(
+            a.jtj / s2 + f.jtj + motion.jtj,
+            a.jtr / s2 + f.jtr + motion.jtr,
+            a.rtr / s2 + f.rtr + motion.rtr,
+            a.log_whitening - self.n_arrivals * np.log(hyper.toa_sigma_s) + f.log_whitening + motion.log_whitening,
+        )
+
+
+def linearise(problem: Problem, u: NDArray, weight: NDArray, priors: KalmanPriors) -> Linearised:
+    arrivals = Rows()
+    toa_residual = _measurements(problem, u, weight, arrivals)
+    fixed = Rows()
+    n_end = _end_fix(problem, u, priors, fixed)
+    _statics(problem, u, priors, fixed)
+    n = problem.n_unknowns
+    return Linearised(
+        problem,
+        u,
+        Normal.of(arrivals, n),
+        len(toa_residual),
+        Normal.of(fixed, n),
+        len(toa_residual) + n_end,
+        toa_residual,
+        priors,
+    )
+
+
+def _factorise(problem: Problem, normal: sparse.spmatrix) -> BorderedBanded:
+    """N = J'J: banded over the nodes (5 unknowns each, coupled to the next node's: half-width
+    9), bordered by the static unknowns."""
+    return BorderedBanded(normal, NODE * problem.n_nodes, 2 * NODE - 1)
+
+
+def solve_step(lin: Linearised, hyper: Hyper) -> tuple[NDArray[np.float64], float]:
+    """The Gauss-Newton step du = -N^-1 J'r (N = J'J) and the marginal log-likelihood of the
+    linearised model at its solution, with |r*|^2 = r'r + (J'r)' du (module docstring)."""
+    normal = lin.normal(hyper)
+    factor = _factorise(lin.problem, normal.jtj)
+    step = -factor.solve(normal.jtr)
+    misfit = normal.rtr + float(np.einsum("i,i->", normal.jtr, step))
+    log_ml = -0.5 * misfit - 0.5 * factor.log_det() + normal.log_whitening - 0.5 * lin.n_data * LOG_2PI
+    return step, log_ml
+
+
+def fit_hyper(lin: Linearised, hyper: Hyper) -> Hyper:
+    """Hyperparameters maximising the marginal likelihood of the model linearised at `lin`
+    (quasi-Newton in log space, numerical gradients, within `Hyper`'s bounds)."""
+
+    def cost(x: NDArray) -> float:
+        return -solve_step(lin, Hyper.from_vector(x))[1]
+
+    bounds = list(zip(np.log(Hyper.LOWER), np.log(Hyper.UPPER), strict=True))
+    start = np.clip(hyper.vector(), *np.log([Hyper.LOWER, Hyper.UPPER]))
+    best = minimize(cost, start, method="L-BFGS-B", bounds=bounds, options={"eps": 1e-4, "ftol": 1e-9, "maxiter": 50})
+    return Hyper.from_vector(best.x)
+
+
+def nuisance_cov_km2(lin: Linearised, hyper: Hyper) -> NDArray[np.float64]:
+    """(K, 2, 2) position covariance due to the clock and timing unknowns at each node:
+    [N^-1]_pp - [N_xx^-1]_pp (module docstring)."""
+    problem = lin.problem
+    normal = lin.normal(hyper).jtj
+    k = np.arange(problem.n_nodes)
+    total = _factorise(problem, normal).diagonal_blocks_of_inverse(NODE * k, 2)
+    motion = (NODE * k[:, None] + np.arange(4)).ravel()
+    given = BorderedBanded(normal[motion][:, motion], 4 * problem.n_nodes, 7).diagonal_blocks_of_inverse(4 * k, 2)
+    out = total - given
+    values, vectors = np.linalg.eigh(0.5 * (out + out.transpose(0, 2, 1)))  # PSD up to round-off
+    return np.einsum("kij,kj,klj->kil", vectors, np.clip(values, 0.0, None), vectors)
+
+
+@dataclass(frozen=True)
+class KalmanFit:
+    """The smoother's solution (module docstring)."""
+
+    hyper: Hyper
+    unknowns: NDArray[np.float64]
+    lat: NDArray[np.float64]  # (K,) fitted positions
+    lon: NDArray[np.float64]
+    velocity_km_per_day: NDArray[np.float64]  # (K, 2)
+    clock_s: NDArray[np.float64]  # (K,) clock residual
+    mean_current_km_per_day: NDArray[np.float64]  # (2,)
+    sound_speed_m_s: float
+    beacon_sound_speed_m_s: NDArray[np.float64]  # (H,) heard beacons
+    offset_s: NDArray[np.float64]  # (H,) a_i - d_i mid_i: correction to the catalogue offset
+    drift_s_per_day: NDArray[np.float64]  # (H,)
+    toa_residual_s: NDArray[np.float64]  # (J,)
+    weight: NDArray[np.float64]  # (J,) EM weights of the arrivals (P(direct path))
+    nuisance_cov_km2: NDArray[np.float64]  # (K, 2, 2)
+    log_evidence: float
+
+    def track(self, time: NDArray[np.datetime64]) -> pd.DataFrame:
+        return pd.DataFrame({"time": time, "lat": self.lat, "lon": self.lon})
+
+
+def fit(
+    problem: Problem,
+    hyper: Hyper,
+    weight_of: Callable[[NDArray, float], NDArray],
+    mid_days: NDArray[np.float64],
+    *,
+    priors: KalmanPriors = KalmanPriors(),
+    iterations: int = 4,
+) -> KalmanFit:
+    """Gauss-Newton with the hyperparameters refitted at each linearisation, and the
+    arrivals' weights from their residuals by `weight_of(residual_s, toa_sigma_s)` (EM for
+    multipath); `mid_days` (H,) the drift reference of each heard beacon."""
+    u = np.zeros(problem.n_unknowns)
+    weight = np.ones(len(problem.toa_s))
+    for _ in range(iterations):
+        lin = linearise(problem, u, weight, priors)
+        hyper = fit_hyper(lin, hyper)
+        u = u + solve_step(lin, hyper)[0]
+        weight = weight_of(linearise(problem, u, weight, priors).toa_residual_s, hyper.toa_sigma_s)
+    lin = linearise(problem, u, weight, priors)
+    _, log_ml = solve_step(lin, hyper)
+    lat, lon = _positions(problem, u)
+    k = np.arange(problem.n_nodes)
+    s0 = problem.slowness_s_per_m
+    ds = u[problem.static("ds")]
+    a, d = u[problem.static("a")], u[problem.static("d")]
+    vbar = problem.static("vbar")
+    return KalmanFit(
+        hyper=hyper,
+        unknowns=u,
+        lat=lat,
+        lon=lon,
+        velocity_km_per_day=np.column_stack([u[NODE * k + 2], u[NODE * k + 3]]),
+        clock_s=u[NODE * k + 4],
+        mean_current_km_per_day=u[vbar : vbar + 2].copy(),
+        sound_speed_m_s=float(1.0 / (s0 + ds)),
+        beacon_sound_speed_m_s=1.0 / (s0 + ds + u[problem.static("dsi")]),
+        offset_s=a - d * mid_days,
+        drift_s_per_day=d,
+        toa_residual_s=lin.toa_residual_s,
+        weight=weight,
+        nuisance_cov_km2=nuisance_cov_km2(lin, hyper),
+        log_evidence=log_ml,
+    )
