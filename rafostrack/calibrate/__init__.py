@@ -38,7 +38,7 @@ from .noise import direct_probability, fit_clutter_rate, fit_multipath
 
 MIN_ARRIVALS = 60  # fewer confident arrivals than this: no calibration
 CONFIDENT_PROB = 0.9
-INITIAL_CLOCK_SD_S_PER_SQRT_DAY = 0.05
+INITIAL_CLOCK_RATE_SD_S_PER_DAY = 0.01
 
 # The config keys calibration may set, (section, key).
 CALIBRATED_KEYS = (
@@ -215,7 +215,7 @@ def calibrate(
 
     motion = config.motion
     start = kalman.Hyper(
-        motion.velocity_sd_km_per_day, motion.decorrelation_days, model.toa_sigma_s, INITIAL_CLOCK_SD_S_PER_SQRT_DAY
+        motion.velocity_sd_km_per_day, motion.decorrelation_days, model.toa_sigma_s, INITIAL_CLOCK_RATE_SD_S_PER_DAY
     )
     fit = kalman.fit(problem, start, weight_of, mid)
     fitted = noise["model"]
@@ -247,7 +247,7 @@ def calibrate(
         "arrivals_used": len(problem.toa_s),
         "windows_used": int(np.unique(problem.node).size),
         "residual_rms_s": round(float(np.sqrt(np.mean(fit.toa_residual_s[direct] ** 2))), 3),
-        "clock_wander_s_per_sqrt_day": round(hyper.clock_sd_s_per_sqrt_day, 4),
+        "clock_rate_sd_s_per_day": round(hyper.clock_rate_sd_s_per_day, 5),
         "log_evidence": round(fit.log_evidence, 2),
         "values": {f"[{s}] {k}": v for (s, k), v in values.items()},
         "kept_as_configured": sorted(f"[{s}] {k}" for s, k in explicit if (s, k) in CALIBRATED_KEYS),

@@ -57,7 +57,9 @@ from ..geodesy import displace, local_offsets_km, range_m
 from ..motion.ou import ou_axis_moments
 from .banded import BorderedBanded
 
-NODE = 5  # unknowns per node: east, north, v_east, v_north, clock
+# Unknowns per node: east, north (km), v_east, v_north (km/day), clock residual (s), its rate (s/day).
+NODE = 6
+VELOCITY, CLOCK, RATE = 2, 4, 5
 LOG_2PI = float(np.log(2.0 * np.pi))
 
 
@@ -70,6 +72,7 @@ class KalmanPriors:
     offset_s: float = 3.0
     drift_s_per_day: float = 0.01
     clock_fix_s: float = 0.5
+    clock_rate_s_per_day: float = 0.1  # of the clock residual's rate at launch
     mean_current_km_per_day: float = 20.0
 
 
@@ -80,12 +83,15 @@ class Hyper:
     velocity_sd_km_per_day: float
     decorrelation_days: float
     toa_sigma_s: float
-    clock_sd_s_per_sqrt_day: float
+    clock_rate_sd_s_per_day: float  # q: the clock rate's random walk, s/day per sqrt(day)
 
     # Bounds of the search, per field (a shorter time scale than a day cannot be told from
     # position errors by daily windows).
-    LOWER = (0.3, 0.5, 0.2, 1e-3)
-    UPPER = (40.0, 60.0, 20.0, 2.0)
+    LOWER = (0.3, 0.5, 0.2, 1e-5)
+    UPPER = (40.0, 60.0, 20.0, 0.3)
+    # Weak log-normal priors (`log_hyperprior`): medians and sds of the natural logs.
+    PRIOR_MEDIAN = (5.0, 5.0, 2.0, 0.01)
+    PRIOR_LOG_SD = (1.5, 1.5, 1.0, 1.0)
 
     def vector(self) -> NDArray[np.float64]:
         return np.log(dataclasses.astuple(self))
@@ -185,7 +191,7 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
               - range_m(*displace(at_lat, at_lon, 0.0, -step), blat, blon)) / (2 * step)  # fmt: skip
     slow = problem.slowness_s_per_m + u[problem.static("ds")] + u[problem.static("dsi")][i]
     a, d = u[problem.static("a")][i], u[problem.static("d")][i]
-    predicted = problem.delay_s + a + d * problem.drift_days + u[NODE * k + 4] + r * slow
+    predicted = problem.delay_s + a + d * problem.drift_days + u[NODE * k + CLOCK] + r * slow
     scale = np.sqrt(weight)
     resid = problem.toa_s - predicted
     rows.add(
@@ -193,7 +199,7 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
         [
             (NODE * k, scale * grad_e * slow),
             (NODE * k + 1, scale * grad_n * slow),
-            (NODE * k + 4, scale),
+            (NODE * k + CLOCK, scale),
             (np.asarray(problem.static("ds")), scale * r),
             (problem.static("dsi")[i], scale * r),
             (problem.static("a")[i], scale),
@@ -204,52 +210,72 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
     return resid
 
 
+def _pair_whitening(var_0: NDArray, cov: NDArray, var_1: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """W = L^-1 for L = chol([[var_0, cov], [cov, var_1]]), elementwise: (w11, w21, w22)."""
+    l11 = np.sqrt(np.maximum(var_0, 1e-12))
+    l21 = cov / l11
+    l22 = np.sqrt(np.maximum(var_1 - l21 * l21, 1e-12))
+    return 1.0 / l11, -l21 / (l11 * l22), 1.0 / l22
+
+
+def _pair_rows(rows: Rows, e: tuple[NDArray, NDArray], de: tuple[list, list], moments: tuple) -> None:
+    """Rows of one linear-Gaussian transition of a (level, rate) pair: errors e = (e_0, e_1)
+    with Jacobian entries de = (entries of e_0, entries of e_1) and covariance moments
+    (var_0, cov, var_1), whitened: rows w11 e_0 and w21 e_0 + w22 e_1."""
+    w11, w21, w22 = _pair_whitening(*moments)
+    d0, d1 = de
+    rows.add(w11 * e[0], [(c, w11 * np.asarray(g)) for c, g in d0], float(np.sum(np.log(w11))))
+    rows.add(
+        w21 * e[0] + w22 * e[1],
+        [(c, w21 * np.asarray(g)) for c, g in d0] + [(c, w22 * np.asarray(g)) for c, g in d1],
+        float(np.sum(np.log(w22))),
+    )
+
+
+def _prior_row(rows: Rows, u: NDArray, col: int, sd: float, mean_col: int | None = None) -> None:
+    """The row of a prior u[col] ~ N(u[mean_col] (or 0), sd^2)."""
+    entries = [(np.array([col]), np.array([1.0 / sd]))]
+    mean = 0.0
+    if mean_col is not None:
+        entries.append((np.array([mean_col]), np.array([-1.0 / sd])))
+        mean = u[mean_col]
+    rows.add(np.array([(u[col] - mean) / sd]), entries, -float(np.log(sd)))
+
+
 def _motion(problem: Problem, u: NDArray, hyper: Hyper, priors: KalmanPriors, rows: Rows) -> None:
-    """The OU transitions (per axis: position and velocity rows, whitened by the 2x2
-    covariance's inverse Cholesky factor), the clock's random walk, and the initial state."""
+    """The transitions between nodes and the initial state: per axis the OU position and
+    velocity, and the clock's integrated random walk (its rate a random walk of sd q per
+    sqrt(day): Var = q^2 [[dt^3 / 3, dt^2 / 2], [dt^2 / 2, dt]]), each pair whitened by the
+    inverse Cholesky factor of its 2x2 covariance."""
     days = elapsed_days(problem.time, problem.time[0])
     dt = np.diff(days)
     k = np.arange(problem.n_nodes - 1)
+    n0, n1 = NODE * k, NODE * (k + 1)
     # Nominal displacement of node k+1 from node k, in k's tangent plane.
-    east, north = local_offsets_km(problem.lat[1:], problem.lon[1:], problem.lat[:-1], problem.lon[:-1])
-    nominal = (east, north)
+    nominal = local_offsets_km(problem.lat[1:], problem.lon[1:], problem.lat[:-1], problem.lon[:-1])
     vbar = problem.static("vbar")
     sd, t = hyper.velocity_sd_km_per_day, hyper.decorrelation_days
     a, var_x, cov, var_v = ou_axis_moments(dt, sd, t)
-    # Whitening of (e_x, e_v) per axis: L = chol([[var_x, cov], [cov, var_v]]), W = L^-1.
-    l11 = np.sqrt(np.maximum(var_x, 1e-12))
-    l21 = cov / l11
-    l22 = np.sqrt(np.maximum(var_v - l21 * l21, 1e-12))
-    w11, w21, w22 = 1.0 / l11, -l21 / (l11 * l22), 1.0 / l22
     one_minus_a = 1.0 - a
     for axis in range(2):
-        p0, p1 = NODE * k + axis, NODE * (k + 1) + axis
-        v0, v1 = NODE * k + 2 + axis, NODE * (k + 1) + 2 + axis
-        e_x = nominal[axis] + u[p1] - u[p0] - t * one_minus_a * u[v0] - (dt - t * one_minus_a) * u[vbar + axis]
-        e_v = u[v1] - a * u[v0] - one_minus_a * u[vbar + axis]
-        # Row 1: w11 e_x; row 2: w21 e_x + w22 e_v.
-        dx = [(p1, 1.0), (p0, -1.0), (v0, -t * one_minus_a), (vbar + axis, -(dt - t * one_minus_a))]
-        dv = [(v1, 1.0), (v0, -a), (vbar + axis, -one_minus_a)]
-        rows.add(w11 * e_x, [(c, w11 * np.asarray(g)) for c, g in dx], float(np.sum(np.log(w11))))
-        rows.add(
-            w21 * e_x + w22 * e_v,
-            [(c, w21 * np.asarray(g)) for c, g in dx] + [(c, w22 * np.asarray(g)) for c, g in dv],
-            float(np.sum(np.log(w22))),
-        )
-    q = hyper.clock_sd_s_per_sqrt_day * np.sqrt(np.maximum(dt, 1e-6))
-    rows.add((u[NODE * (k + 1) + 4] - u[NODE * k + 4]) / q, [(NODE * (k + 1) + 4, 1 / q), (NODE * k + 4, -1 / q)],
-             -float(np.sum(np.log(q))))  # fmt: skip
+        p0, p1, v0, v1, m = n0 + axis, n1 + axis, n0 + VELOCITY + axis, n1 + VELOCITY + axis, vbar + axis
+        e_x = nominal[axis] + u[p1] - u[p0] - t * one_minus_a * u[v0] - (dt - t * one_minus_a) * u[m]
+        e_v = u[v1] - a * u[v0] - one_minus_a * u[m]
+        dx = [(p1, 1.0), (p0, -1.0), (v0, -t * one_minus_a), (m, -(dt - t * one_minus_a))]
+        dv = [(v1, 1.0), (v0, -a), (m, -one_minus_a)]
+        _pair_rows(rows, (e_x, e_v), (dx, dv), (var_x, cov, var_v))
+    q2 = hyper.clock_rate_sd_s_per_day**2
+    c0, c1, r0, r1 = n0 + CLOCK, n1 + CLOCK, n0 + RATE, n1 + RATE
+    e_c = u[c1] - u[c0] - dt * u[r0]
+    e_r = u[r1] - u[r0]
+    _pair_rows(rows, (e_c, e_r), ([(c1, 1.0), (c0, -1.0), (r0, -dt)], [(r1, 1.0), (r0, -1.0)]),
+               (q2 * dt**3 / 3.0, q2 * dt**2 / 2.0, q2 * dt))  # fmt: skip
     # Initial state: launch position, velocity about the mean current, clock measured at launch.
     for axis in range(2):
-        s = problem.launch_sd_km
-        rows.add(np.array([u[axis] / s]), [(np.array([axis]), np.array([1 / s]))], -np.log(s))
-        rows.add(
-            np.array([(u[2 + axis] - u[vbar + axis]) / sd]),
-            [(np.array([2 + axis]), np.array([1 / sd])), (np.array([vbar + axis]), np.array([-1 / sd]))],
-            -np.log(sd),
-        )
-    c = priors.clock_fix_s
-    rows.add(np.array([u[4] / c]), [(np.array([4]), np.array([1 / c]))], -np.log(c))
+        _prior_row(rows, u, axis, problem.launch_sd_km)
+        _prior_row(rows, u, VELOCITY + axis, sd, mean_col=vbar + axis)
+    _prior_row(rows, u, CLOCK, priors.clock_fix_s)
+    _prior_row(rows, u, RATE, priors.clock_rate_s_per_day)
 
 
 def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> None:
@@ -271,14 +297,10 @@ def _end_fix(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> 
     """The end fix's rows (data): position and clock at the last node. Returns their count."""
     if problem.end_sd_km is None:
         return 0
-    last = problem.n_nodes - 1
-    s = problem.end_sd_km
+    last = NODE * (problem.n_nodes - 1)
     for axis in range(2):
-        col = np.array([NODE * last + axis])
-        rows.add(np.array([u[col[0]] / s]), [(col, np.array([1 / s]))], -np.log(s))
-    c = priors.clock_fix_s
-    col = np.array([NODE * last + 4])
-    rows.add(np.array([u[col[0]] / c]), [(col, np.array([1 / c]))], -np.log(c))
+        _prior_row(rows, u, last + axis, problem.end_sd_km)
+    _prior_row(rows, u, last + CLOCK, priors.clock_fix_s)
     return 3
 
 
@@ -362,12 +384,23 @@ def solve_step(lin: Linearised, hyper: Hyper) -> tuple[NDArray[np.float64], floa
     return step, log_ml
 
 
+def log_hyperprior(hyper: Hyper) -> float:
+    """log p(h): independent log-normal priors (medians `Hyper.PRIOR_MEDIAN`, log-sds
+    `Hyper.PRIOR_LOG_SD`). They only keep the search where the data do not decide: in a
+    geometry where every source lies on one side, a common shift of all arrival times looks
+    like a move towards the sources, and the clock's wander and the track can trade places."""
+    z = (hyper.vector() - np.log(Hyper.PRIOR_MEDIAN)) / np.array(Hyper.PRIOR_LOG_SD)
+    return float(-0.5 * np.sum(z * z))
+
+
 def fit_hyper(lin: Linearised, hyper: Hyper) -> Hyper:
-    """Hyperparameters maximising the marginal likelihood of the model linearised at `lin`
-    (quasi-Newton in log space, numerical gradients, within `Hyper`'s bounds)."""
+    """Hyperparameters maximising the marginal likelihood of the model linearised at `lin`,
+    times their prior (`log_hyperprior`): quasi-Newton in log space, numerical gradients,
+    within `Hyper`'s bounds."""
 
     def cost(x: NDArray) -> float:
-        return -solve_step(lin, Hyper.from_vector(x))[1]
+        h = Hyper.from_vector(x)
+        return -solve_step(lin, h)[1] - log_hyperprior(h)
 
     bounds = list(zip(np.log(Hyper.LOWER), np.log(Hyper.UPPER), strict=True))
     start = np.clip(hyper.vector(), *np.log([Hyper.LOWER, Hyper.UPPER]))
@@ -382,7 +415,7 @@ def nuisance_cov_km2(lin: Linearised, hyper: Hyper) -> NDArray[np.float64]:
     normal = lin.normal(hyper).jtj
     k = np.arange(problem.n_nodes)
     total = _factorise(problem, normal).diagonal_blocks_of_inverse(NODE * k, 2)
-    motion = (NODE * k[:, None] + np.arange(4)).ravel()
+    motion = (NODE * k[:, None] + np.arange(4)).ravel()  # positions and velocities
     given = BorderedBanded(normal[motion][:, motion], 4 * problem.n_nodes, 7).diagonal_blocks_of_inverse(4 * k, 2)
     out = total - given
     values, vectors = np.linalg.eigh(0.5 * (out + out.transpose(0, 2, 1)))  # PSD up to round-off
@@ -433,6 +466,8 @@ def fit(
         u = u + solve_step(lin, hyper)[0]
         weight = weight_of(linearise(problem, u, weight, priors).toa_residual_s, hyper.toa_sigma_s)
     lin = linearise(problem, u, weight, priors)
+    u = u + solve_step(lin, hyper)[0]
+    lin = linearise(problem, u, weight, priors)
     _, log_ml = solve_step(lin, hyper)
     lat, lon = _positions(problem, u)
     k = np.arange(problem.n_nodes)
@@ -445,8 +480,8 @@ def fit(
         unknowns=u,
         lat=lat,
         lon=lon,
-        velocity_km_per_day=np.column_stack([u[NODE * k + 2], u[NODE * k + 3]]),
-        clock_s=u[NODE * k + 4],
+        velocity_km_per_day=np.column_stack([u[NODE * k + VELOCITY], u[NODE * k + VELOCITY + 1]]),
+        clock_s=u[NODE * k + CLOCK],
         mean_current_km_per_day=u[vbar : vbar + 2].copy(),
         sound_speed_m_s=float(1.0 / (s0 + ds)),
         beacon_sound_speed_m_s=1.0 / (s0 + ds + u[problem.static("dsi")]),
