@@ -101,8 +101,6 @@ class RecoveryConfig:
     search_radius_km: float = setting("> 0", _positive)
     reseed_fraction: float = setting("in (0, 0.9]", lambda v: 0 < v <= 0.9)
     check_every: int = setting(">= 1", lambda v: v >= 1)
-    backward_pass: bool = setting()
-    guide_fraction: float = setting("in (0, 0.5]", lambda v: 0 < v <= 0.5)
 
 
 @dataclass(frozen=True)
@@ -110,6 +108,8 @@ class CalibrateConfig:
     """Estimate the record's nuisances from a first pass (`rafostrack.calibrate`)."""
 
     enabled: bool = setting()
+    first_pass_toa_sigma_s: float = setting("> 0", _positive)
+    iterations: int = setting("between 1 and 5", lambda v: 1 <= v <= 5)
 
 
 @dataclass(frozen=True)

@@ -93,11 +93,12 @@ class EstimateBuilder:
         step: Step,
         weights: NDArray | None = None,
         label_probs: LabelProbs | None = None,
-        kernel_cov_km2: NDArray | None = None,
+        extra_cov_km2: NDArray | None = None,
     ) -> None:
         """Summarise `step` under `weights` (default: its filter weights). Labels come from
-        the step's filtered marginals, or from `label_probs` under the given weights; a
-        regularised smoother's kernel covariance widens every position's covariance."""
+        the step's filtered marginals, or from `label_probs` under the given weights;
+        `extra_cov_km2` (2, 2) is added to every position's covariance (a regularised
+        smoother's kernel, the calibration's undetermined nuisances)."""
         window = step.window
         if window is None:  # a position fix: an observation, not an output row
             return
@@ -111,7 +112,7 @@ class EstimateBuilder:
             min_weight=amb.min_mode_weight,
             min_separation_km=amb.min_separation_km,
             separation_factor=amb.separation_factor,
-            kernel_cov_km2=kernel_cov_km2,
+            extra_cov_km2=extra_cov_km2,
         )
         self.window_ess.append(step.ess)
         position = modes.first if modes.ambiguous else modes.whole
@@ -178,16 +179,19 @@ def build_estimate(
     ambiguity: AmbiguityConfig,
     smoothed: Smoothed | None = None,
     label_probs: LabelProbs | None = None,
+    extra_cov_km2: NDArray | None = None,
 ) -> Estimate:
     """Tables for every window among `steps`: filtered (each step's own weights), or under
-    the `smoothed` weights (one array per step) with labels from `label_probs`."""
+    the `smoothed` weights (one array per step) with labels from `label_probs`;
+    `extra_cov_km2` (one (2, 2) per step) widens the covariances."""
     builder = EstimateBuilder(float_id, beacon_ids, ambiguity, "filtered" if smoothed is None else "smoothed")
+    extra = [None] * len(steps) if extra_cov_km2 is None else list(extra_cov_km2)
     if smoothed is None:
-        for step in steps:
-            builder.add(step)
+        for step, cov in zip(steps, extra, strict=True):
+            builder.add(step, extra_cov_km2=cov)
     else:
-        for step, weights, kernel in zip(steps, smoothed.weights, smoothed.kernel_cov_km2, strict=True):
-            builder.add(step, weights, label_probs, kernel)
+        for step, weights, cov in zip(steps, smoothed.weights, extra, strict=True):
+            builder.add(step, weights, label_probs, cov)
     return builder.result()
 
 

@@ -23,11 +23,11 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from .clusters import mode_labels
 from .domain import Cloud, Particles, PositionFix, Window, days_between
 from .likelihoods import ArrivalLikelihood, Evidence, Likelihood, MoveFactor
 from .motion import MotionModel
 from .recovery import RecoveryMonitor, RecoverySettings
-from .clusters import mode_labels
 from .resampling import Resampler, ess, normalise_log_weights, resample_within, within_mode_ess
 
 Observation = Window | PositionFix
@@ -114,14 +114,9 @@ class Proposal(Protocol):
     def log_density(self, particles: Particles) -> NDArray[np.float64]: ...
 
 
-# Per observation, the data-driven proposals to mix with the motion model: (fraction, proposal).
-Guide = Callable[[Observation], list[tuple[float, Proposal]]]
-
-
 class ParticleFilter:
-    """Particle filter for one float (see module docstring), with optional data-driven
-    proposals: a recovery monitor that re-seeds a lost cloud, and a guide (proposals given
-    per observation, e.g. from a first pass)."""
+    """Particle filter for one float (see module docstring), with an optional data-driven
+    proposal: a recovery monitor that re-seeds a lost cloud."""
 
     def __init__(
         self,
@@ -132,7 +127,6 @@ class ParticleFilter:
         *,
         label_probs: bool = True,
         recovery: RecoverySettings | None = None,
-        guide: Guide | None = None,
         factors: Sequence[MoveFactor] = (),
     ):
         """`factors` weigh each particle's move (e.g. context constraints).
@@ -144,7 +138,6 @@ class ParticleFilter:
         self.settings = settings
         self.label_probs = label_probs
         self.recovery = recovery
-        self.guide = guide
         self.factors = tuple(factors)
 
     def run(
@@ -173,7 +166,7 @@ class ParticleFilter:
             prior_weights, log_prior = normalise_log_weights(log_w)
             moved = self.motion.propagate(particles, dt_days, rng)
             evidence = self._evaluate(moved, obs)
-            proposals = [] if self.guide is None else list(self.guide(obs))
+            proposals: list[tuple[float, Proposal]] = []
             reseed_source = -1  # the `source` value of re-seeded particles, if any
             if monitor is not None and isinstance(obs, Window):
                 reseed = monitor.proposal(obs, dt_days, moved, prior_weights, evidence.loglik)

@@ -90,7 +90,7 @@ def two_modes(
     min_separation_km: float,
     separation_factor: float,
     iterations: int = 20,
-    kernel_cov_km2: NDArray | None = None,
+    extra_cov_km2: NDArray | None = None,
 ) -> Modes:
     """Split the cloud into two clusters (weighted 2-means, started across the principal
     axis) and decide whether they are separate modes.
@@ -101,10 +101,11 @@ def two_modes(
     joining the means. A unimodal Gaussian split this way gives d / (s_1 + s_2) ~ 1.3;
     two modes far apart relative to their widths give much larger ratios.
 
-    `kernel_cov_km2`: when each particle stands for a Gaussian kernel of this covariance (a
-    regularised smoother, `smoother.smooth`), it is added to every cluster's covariance.
+    `extra_cov_km2`: a covariance added to every cluster's (when each particle stands for a
+    Gaussian kernel of this covariance, as in a regularised smoother, or for what the
+    particles' model leaves out).
     """
-    kernel = np.zeros((2, 2)) if kernel_cov_km2 is None else np.asarray(kernel_cov_km2)
+    kernel = np.zeros((2, 2)) if extra_cov_km2 is None else np.asarray(extra_cov_km2)
     carried = weights > 0  # smoothing leaves exact zeros; they belong to no mode
     lat, lon, weights = lat[carried], lon[carried], weights[carried]
     ref_lat, ref_lon, xy = _frame(lat, lon, weights)

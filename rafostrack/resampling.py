@@ -4,8 +4,8 @@ Every scheme maps normalised weights W (N,) to M ancestor indices (M = N unless 
 with E[copies of p] = M W_p; they differ in variance (systematic and stratified are lower
 than multinomial; residual copies floor(M W_p) deterministically). `RESAMPLERS` maps the
 config's `[filter] resampling` to a scheme. `resample_within` resamples each mode of a
-multimodal cloud on its own, keeping the modes' masses (`rafostrack.clusters`). Sums avoid BLAS, whose threaded reductions would make
-results depend on the machine's thread count.
+multimodal cloud on its own, keeping the modes' masses (`rafostrack.clusters`). Sums avoid
+BLAS, whose threaded reductions would make results depend on the machine's thread count.
 """
 
 from __future__ import annotations

@@ -9,18 +9,18 @@ benchmarks and experiments call it directly.
 from __future__ import annotations
 
 import time
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
 from .config import AmbiguityConfig, Config
 from .domain import ArrivalRecord, BeaconTable, FloatInfo, PositionFix
 from .estimates import Estimate, EstimateBuilder, build_estimate
-from .filter import FilterResult, FilterSettings, Guide, ParticleFilter, Step, float_rng, observations
+from .filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
 from .likelihoods import (
     ArrivalLikelihood,
     MoveFactor,
@@ -124,11 +124,9 @@ class Tracker:
         label_probs: bool = True,
         keep: bool = True,
         on_step: Callable[[Step], None] | None = None,
-        guide: Guide | None = None,
     ) -> FilterResult:
         """The forward filter over the record (and the end fix), with the float's own
-        generator; see `ParticleFilter.run` for `keep` and `on_step`, and `guide` for its
-        proposals."""
+        generator; see `ParticleFilter.run` for `keep` and `on_step`."""
         info = self.info
         fixes = PositionFixLikelihood(info.float_id)
         pf = ParticleFilter(
@@ -138,54 +136,58 @@ class Tracker:
             self.settings,
             label_probs=label_probs,
             recovery=self.recovery,
-            guide=guide,
             factors=self.factors,
         )
         launch = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
         events = observations(record.windows, self.end_fix)
         return pf.run(launch, events, float_rng(self.seed, info.float_id), keep=keep, on_step=on_step)
 
-    def run_backward(self, record: ArrivalRecord, start: PositionFix) -> FilterResult:
-        """The filter run backwards in time from `start` (the recovery fix, or a broad guess
-        at the last window) over the windows, latest first, with the reversed drift model;
-        its velocities are those of the reversed motion (`MotionModel.reversed`)."""
-        info = self.info
-        fixes = PositionFixLikelihood(info.float_id)
-        pf = ParticleFilter(
-            self.motion.reversed(),
-            self.arrivals,
-            fixes,
-            self.settings,
-            label_probs=False,
-            recovery=self.recovery,
-            factors=self.factors,
-        )
-        rng = np.random.default_rng([self.seed, zlib.crc32(info.float_id.encode("utf-8")), 1])
-        return pf.run(start, list(reversed(record.windows)), rng)
-
-    def track(self, record: ArrivalRecord, *, also_filtered: bool = False, guide: Guide | None = None) -> TrackOutput:
-        """Filter the record, then smooth if configured, and summarise.
+    def track(
+        self,
+        record: ArrivalRecord,
+        *,
+        also_filtered: bool = False,
+        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None = None,
+    ) -> TrackOutput:
+        """Filter the record, then smooth if configured, and summarise. `extra_cov(times)`
+        gives a (n, 2, 2) covariance (km^2) to add to each window's position covariance:
+        what the filter's model does not represent (`Calibration.nuisance_cov_at`).
 
         Without smoothing, each step is summarised as the filter makes it and then dropped,
         so memory does not grow with the record; smoothing needs every step's cloud (about
         24 bytes per particle per window, 40 with a velocity)."""
         float_id = self.info.float_id
         started = time.perf_counter()
+
+        def extra(time: np.datetime64) -> NDArray[np.float64] | None:
+            return None if extra_cov is None else extra_cov(np.array([time], dtype="datetime64[ns]"))[0]
+
         if not self.smooth:
             builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered")
-            run = self.run_filter(record, keep=False, on_step=builder.add, guide=guide)
+            run = self.run_filter(
+                record, keep=False, on_step=lambda step: builder.add(step, extra_cov_km2=extra(step.cloud.time))
+            )
             estimate = builder.result()
             elapsed = time.perf_counter() - started
             return TrackOutput(estimate, estimate, run.n_resamples, run.warnings, elapsed, 0.0, **_counts(run, builder))
 
-        run = self.run_filter(record, label_probs=also_filtered, guide=guide)
+        run = self.run_filter(record, label_probs=also_filtered)
         filter_s = time.perf_counter() - started
-        filtered = build_estimate(float_id, run.steps, self.beacon_ids, self.ambiguity) if also_filtered else None
-
+        times = np.array([s.cloud.time for s in run.steps], dtype="datetime64[ns]")
+        nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))
+        filtered = None
+        if also_filtered:
+            filtered = build_estimate(float_id, run.steps, self.beacon_ids, self.ambiguity, extra_cov_km2=nuisance)
         started = time.perf_counter()
         smoothed = smooth([s.cloud for s in run.steps], self.motion)
         estimate = build_estimate(
-            float_id, run.steps, self.beacon_ids, self.ambiguity, smoothed, self.arrivals.label_probs
+            float_id,
+            run.steps,
+            self.beacon_ids,
+            self.ambiguity,
+            smoothed,
+            self.arrivals.label_probs,
+            extra_cov_km2=nuisance + np.array(smoothed.kernel_cov_km2).reshape(-1, 2, 2),
         )
         smoother_s = time.perf_counter() - started
         return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s, **_counts(run))

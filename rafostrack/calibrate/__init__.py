@@ -99,13 +99,13 @@ def _problem(
         return None
     positions = track.set_index("time")
     window_t = np.unique(sure["time"].to_numpy(dtype="datetime64[ns]"))
-    launch_t = np.datetime64(info.launch_time, "ns")
+    launch_t = np.asarray(info.launch_time, dtype="datetime64[ns]")[()]
     times = [launch_t, *window_t[window_t > launch_t]]
     lat = [info.launch_lat, *positions.loc[times[1:], "lat"].to_numpy()]
     lon = [info.launch_lon, *positions.loc[times[1:], "lon"].to_numpy()]
     end_sd = None
     if config.fixes.use_end_fix and info.has_end_fix:
-        end_t = np.datetime64(info.end_time, "ns")
+        end_t = np.asarray(info.end_time, dtype="datetime64[ns]")[()]
         if end_t <= times[-1]:  # a window at the end time: its node is the end fix's
             times, lat, lon = times[:-1], lat[:-1], lon[:-1]
         times.append(end_t)
@@ -232,7 +232,9 @@ def calibrate(
         ("motion", "velocity_sd_km_per_day"): round(hyper.velocity_sd_km_per_day, 3),
         ("motion", "decorrelation_days"): round(hyper.decorrelation_days, 2),
         # The random walk with the same long-time spread: D^2 = 2 sigma_v^2 T per axis per day.
-        ("motion", "diffusion_km_per_day"): round(hyper.velocity_sd_km_per_day * np.sqrt(2 * hyper.decorrelation_days), 3),
+        ("motion", "diffusion_km_per_day"): round(
+            hyper.velocity_sd_km_per_day * np.sqrt(2 * hyper.decorrelation_days), 3
+        ),
     }
     values = {k: v for k, v in values.items() if k not in explicit}
     corrected = _corrected_beacons(beacons, heard, fit)

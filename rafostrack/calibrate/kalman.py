@@ -131,12 +131,19 @@ class Problem:
     def n_unknowns(self) -> int:
         return NODE * self.n_nodes + 3 + 3 * self.n_heard
 
-    # Static unknowns: vbar (2), ds, then a_i, d_i, ds_i per heard beacon.
-    def static(self, name: str) -> int | NDArray[np.intp]:
-        base = NODE * self.n_nodes
-        h = np.arange(self.n_heard)
-        return {"vbar": base, "ds": base + 2, "a": base + 3 + h, "d": base + 3 + self.n_heard + h,
-                "dsi": base + 3 + 2 * self.n_heard + h}[name]  # fmt: skip
+    # Static unknowns after the nodes: vbar (2), ds, then a_i, d_i, ds_i per heard beacon.
+    @property
+    def vbar(self) -> int:
+        """Index of the mean current's east component (north follows)."""
+        return NODE * self.n_nodes
+
+    @property
+    def ds(self) -> int:
+        return NODE * self.n_nodes + 2
+
+    def per_beacon(self, block: int) -> NDArray[np.intp]:
+        """Indices of the per-beacon unknowns: block 0 = a_i, 1 = d_i, 2 = ds_i."""
+        return NODE * self.n_nodes + 3 + block * self.n_heard + np.arange(self.n_heard)
 
 
 @dataclass
@@ -189,8 +196,9 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
               - range_m(*displace(at_lat, at_lon, -step, 0.0), blat, blon)) / (2 * step)  # fmt: skip
     grad_n = (range_m(*displace(at_lat, at_lon, 0.0, step), blat, blon)
               - range_m(*displace(at_lat, at_lon, 0.0, -step), blat, blon)) / (2 * step)  # fmt: skip
-    slow = problem.slowness_s_per_m + u[problem.static("ds")] + u[problem.static("dsi")][i]
-    a, d = u[problem.static("a")][i], u[problem.static("d")][i]
+    offsets, drifts, slownesses = (problem.per_beacon(block)[i] for block in range(3))
+    slow = problem.slowness_s_per_m + u[problem.ds] + u[slownesses]
+    a, d = u[offsets], u[drifts]
     predicted = problem.delay_s + a + d * problem.drift_days + u[NODE * k + CLOCK] + r * slow
     scale = np.sqrt(weight)
     resid = problem.toa_s - predicted
@@ -200,10 +208,10 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
             (NODE * k, scale * grad_e * slow),
             (NODE * k + 1, scale * grad_n * slow),
             (NODE * k + CLOCK, scale),
-            (np.asarray(problem.static("ds")), scale * r),
-            (problem.static("dsi")[i], scale * r),
-            (problem.static("a")[i], scale),
-            (problem.static("d")[i], scale * problem.drift_days),
+            (np.asarray(problem.ds), scale * r),
+            (slownesses, scale * r),
+            (offsets, scale),
+            (drifts, scale * problem.drift_days),
         ],
         float(np.sum(np.log(scale))),
     )
@@ -253,7 +261,7 @@ def _motion(problem: Problem, u: NDArray, hyper: Hyper, priors: KalmanPriors, ro
     n0, n1 = NODE * k, NODE * (k + 1)
     # Nominal displacement of node k+1 from node k, in k's tangent plane.
     nominal = local_offsets_km(problem.lat[1:], problem.lon[1:], problem.lat[:-1], problem.lon[:-1])
-    vbar = problem.static("vbar")
+    vbar = problem.vbar
     sd, t = hyper.velocity_sd_km_per_day, hyper.decorrelation_days
     a, var_x, cov, var_v = ou_axis_moments(dt, sd, t)
     one_minus_a = 1.0 - a
@@ -281,15 +289,13 @@ def _motion(problem: Problem, u: NDArray, hyper: Hyper, priors: KalmanPriors, ro
 def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> None:
     """Priors of the static parameters (slowness sds from sound-speed sds: ds = -dc / c^2)."""
     s0 = problem.slowness_s_per_m
-    for name, sd in (
-        ("vbar", priors.mean_current_km_per_day),
-        ("ds", priors.sound_speed_m_s * s0 * s0),
-        ("a", priors.offset_s),
-        ("d", priors.drift_s_per_day),
-        ("dsi", priors.beacon_sound_speed_m_s * s0 * s0),
+    for idx, sd in (
+        (np.array([problem.vbar, problem.vbar + 1]), priors.mean_current_km_per_day),
+        (np.array([problem.ds]), priors.sound_speed_m_s * s0 * s0),
+        (problem.per_beacon(0), priors.offset_s),
+        (problem.per_beacon(1), priors.drift_s_per_day),
+        (problem.per_beacon(2), priors.beacon_sound_speed_m_s * s0 * s0),
     ):
-        idx = problem.static(name)
-        idx = np.arange(idx, idx + 2) if name == "vbar" else np.atleast_1d(idx)
         rows.add(u[idx] / sd, [(idx, np.full(len(idx), 1 / sd))], -len(idx) * float(np.log(sd)))
 
 
@@ -472,9 +478,9 @@ def fit(
     lat, lon = _positions(problem, u)
     k = np.arange(problem.n_nodes)
     s0 = problem.slowness_s_per_m
-    ds = u[problem.static("ds")]
-    a, d = u[problem.static("a")], u[problem.static("d")]
-    vbar = problem.static("vbar")
+    ds = u[problem.ds]
+    a, d = u[problem.per_beacon(0)], u[problem.per_beacon(1)]
+    vbar = problem.vbar
     return KalmanFit(
         hyper=hyper,
         unknowns=u,
@@ -484,7 +490,7 @@ def fit(
         clock_s=u[NODE * k + CLOCK],
         mean_current_km_per_day=u[vbar : vbar + 2].copy(),
         sound_speed_m_s=float(1.0 / (s0 + ds)),
-        beacon_sound_speed_m_s=1.0 / (s0 + ds + u[problem.static("dsi")]),
+        beacon_sound_speed_m_s=1.0 / (s0 + ds + u[problem.per_beacon(2)]),
         offset_s=a - d * mid_days,
         drift_s_per_day=d,
         toa_residual_s=lin.toa_residual_s,
