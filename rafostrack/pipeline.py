@@ -93,6 +93,11 @@ def load_float(inputs: TrackInputs) -> LoadedFloat:
 
 
 def _float_info(floats_path: Path, inputs: TrackInputs, config: Config) -> FloatInfo:
+    if not floats_path.exists():
+        raise InputError(
+            f"{floats_path}: file not found; expected a float table (float_id, launch_time, launch_lat, launch_lon) "
+            "beside the float file, or give --floats FILE, or --launch LAT,LON to start from a launch position"
+        )
     floats = read_floats(floats_path, config.model)
     if inputs.float_id not in floats:
         raise InputError(

@@ -265,3 +265,53 @@ def test_cli_warnings_listed_in_run_json_and_stderr(sim_mission_dir, tmp_path):
     printed = [line for line in result.stderr.splitlines() if line.startswith("rafostrack: warning: ")]
     assert printed == [f"rafostrack: warning: {w}" for w in run["warnings"]]
     assert f"rafostrack: {len(run['warnings'])} warning(s), also listed in {out / 'sim1' / 'run.json'}" in result.stderr
+
+
+# --------------------------------------------------------------------------------------
+# Issue 14 item 7: usage errors are the documented one line too
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["track", "{f}", "--particles", "10.5"], "track: invalid value for '--particles': '10.5' is not a valid integer. (see 'rafostrack track --help')"),
+        (["batch", "{m}", "--out", "{o}", "--jobs", "0"], "--jobs"),
+        (["track", "{f}", "--bogus-option"], "track: no such option '--bogus-option'"),
+        (["trak", "{f}"], "no such command 'trak'. did you mean 'track'? (see 'rafostrack --help')"),
+        (["track"], "missing argument 'FLOAT_FILE'"),
+    ],
+)
+def test_usage_errors_are_one_line_and_exit_2(mission_dir, tmp_path, args, needle):
+    subs = {"{f}": str(_float_file(mission_dir)), "{m}": str(mission_dir), "{o}": str(tmp_path / "o")}
+    args = [subs.get(a, a) for a in args]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rafostrack: error: "), result.output
+    assert needle.lower() in lines[0].lower()
+    assert "Usage:" not in result.output
+
+
+def test_debug_after_the_subcommand(sim_mission_dir, tmp_path):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    (m / "floats.csv").write_text("")
+    result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(tmp_path / "out"), "--debug"])
+    assert isinstance(result.exception, InputError) and "file is empty" in str(result.exception)
+
+
+def test_missing_column_suggestion_goes_from_the_typo_to_the_name(sim_mission_dir, tmp_path):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    text = (m / "sim1.csv").read_text().replace("time,toa_s,", "time,toa,", 1)
+    (m / "sim1.csv").write_text(text)
+    result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert "missing required column 'toa_s'" in result.output
+    assert "did you mean 'toa_s'?" in result.output and "did you mean 'toa'?" not in result.output
+
+
+def test_missing_floats_csv_names_launch(sim_mission_dir, tmp_path):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    (m / "floats.csv").unlink()
+    result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert "floats.csv: file not found" in result.output and "--launch LAT,LON" in result.output
