@@ -217,7 +217,13 @@ def track(
         config_files=(config_file,) if config_file else (),
         overrides=_overrides(**flags, smooth=False if no_smooth else None),
     )
-    result = track_float(inputs, out_dir, plots=not no_plots, also_filtered=also_filtered)
+    from . import progress as progress_module
+
+    progress = progress_module.progress_for(sys.stderr, label=float_file.stem)
+    try:
+        result = track_float(inputs, out_dir, plots=not no_plots, also_filtered=also_filtered, progress=progress)
+    finally:
+        progress.close()
     for message in result.run["warnings"]:
         click.echo(f"rafostrack: warning: {message}", err=True)
     if result.run["warnings"]:

@@ -7,6 +7,7 @@ to F; explicit paths and a launch position override them.
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,9 +20,10 @@ from .config import Config, explicit_keys, load_config
 from .domain import ArrivalRecord, BeaconTable, FloatInfo
 from .errors import InputError, Warnings, nearest
 from .io import read_arrivals, read_beacons, read_floats
-from .io.outdir import check_output_dir
+from .io.outdir import check_output_dir, staging_dir, swap_into_place
 from .io.writers import file_digest, write_json, write_parquet
 from .method import track_record
+from .progress import NoProgress, Progress
 from .tracker import TrackOutput
 
 MISSION_CONFIG = "rafostrack.toml"
@@ -139,26 +141,64 @@ class TrackResult:
     run: dict[str, Any]
 
 
-def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also_filtered: bool = False) -> TrackResult:
+def track_float(
+    inputs: TrackInputs,
+    out_root: Path,
+    *,
+    plots: bool = True,
+    also_filtered: bool = False,
+    progress: Progress | None = None,
+) -> TrackResult:
     """Track one float and write `out_root/<float_id>/`: Parquet tables, plots, run.json.
 
     `track.parquet`, `labels.parquet` and `modes.parquet` hold the smoothed estimate (the
     filtered one when the smoother is off; their metadata `estimate` says which);
-    `also_filtered` adds `*_filtered.parquet` beside them.
+    `also_filtered` adds `*_filtered.parquet` beside them. The directory is built in a
+    hidden sibling and swapped in whole (`io.outdir.swap_into_place`): it holds exactly
+    this run's files, and a run that fails or is killed leaves the previous one untouched.
+    `run.json`'s `runtime_s` covers the whole run, plots included.
     """
     started = time.perf_counter()
+    progress = progress or NoProgress()
     check_output_dir(Path(out_root))
+    progress.phase("reading inputs")
     loaded = load_float(inputs)
     config = loaded.config
+    progress.phase("tracking")
     output = track_record(
         loaded.beacons, loaded.info, config, loaded.record, also_filtered=also_filtered, explicit=loaded.explicit
     )
-    elapsed = time.perf_counter() - started
+    track_s = time.perf_counter() - started
 
-    out_dir = Path(out_root) / loaded.info.float_id
+    final = Path(out_root) / loaded.info.float_id
+    staging = staging_dir(final)
+    try:
+        if staging.exists():
+            shutil.rmtree(staging)
+        staging.mkdir(parents=True)
+        progress.phase("writing outputs")
+        write_tables(staging, output, config, also_filtered=also_filtered)
+        if plots:
+            progress.phase("drawing plots")
+            from . import plots as plotting
+
+            plotting.write_plots(staging, output.estimate, loaded.beacons, loaded.info, config.model)
+        run = run_record(inputs, loaded, output, time.perf_counter() - started)
+        run["track_s"] = round(track_s, 3)
+        write_json(staging / "run.json", run)
+        swap_into_place(staging, final)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return TrackResult(loaded.info.float_id, final, output, run)
+
+
+def write_tables(out_dir: Path, output: TrackOutput, config: Config, *, also_filtered: bool = False) -> list[Path]:
+    """The estimate's tables (and the filtered ones when asked for) as Parquet, with the run's
+    metadata in each file's schema."""
     estimates = [(output.estimate, "")]
     if also_filtered and output.filtered is not None and output.filtered is not output.estimate:
         estimates.append((output.filtered, "_filtered"))
+    written = []
     for estimate, suffix in estimates:
         meta = {
             "version": __version__,
@@ -168,16 +208,11 @@ def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also
             "estimate": estimate.kind,
             "config": config.to_dict(),
         }
-        write_parquet(estimate.track, out_dir / f"track{suffix}.parquet", meta)
-        write_parquet(estimate.labels, out_dir / f"labels{suffix}.parquet", meta)
-        write_parquet(estimate.modes, out_dir / f"modes{suffix}.parquet", meta)
-    if plots:
-        from .plots import write_plots
-
-        write_plots(out_dir, output.estimate, loaded.beacons, loaded.info, config.model)
-    run = run_record(inputs, loaded, output, elapsed)
-    write_json(out_dir / "run.json", run)
-    return TrackResult(loaded.info.float_id, out_dir, output, run)
+        for name, frame in (("track", estimate.track), ("labels", estimate.labels), ("modes", estimate.modes)):
+            path = Path(out_dir) / f"{name}{suffix}.parquet"
+            write_parquet(frame, path, meta)
+            written.append(path)
+    return written
 
 
 def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, elapsed_s: float) -> dict[str, Any]:

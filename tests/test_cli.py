@@ -315,3 +315,50 @@ def test_missing_floats_csv_names_launch(sim_mission_dir, tmp_path):
     result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(tmp_path / "out")])
     assert result.exit_code == 2
     assert "floats.csv: file not found" in result.output and "--launch LAT,LON" in result.output
+
+
+# --------------------------------------------------------------------------------------
+# Issue 14 item 4: progress on a terminal; the printed time includes the plots
+
+
+def _slow_plots(seconds: float):
+    import time
+
+    def write_plots(outdir, *args, **kwargs):
+        time.sleep(seconds)
+        return []
+
+    return write_plots
+
+
+def test_printed_time_includes_the_plots(sim_mission_dir, tmp_path, monkeypatch):
+    import re
+    import time
+
+    import rafostrack.plots
+
+    monkeypatch.setattr(rafostrack.plots, "write_plots", _slow_plots(1.0))
+    started = time.perf_counter()
+    result = CliRunner().invoke(main, ["track", str(sim_mission_dir / "sim1.csv"), "--out", str(tmp_path)])
+    wall = time.perf_counter() - started
+    assert result.exit_code == 0, result.output
+    printed = float(re.search(r", ([0-9.]+) s -> ", result.output).group(1))
+    assert printed >= wall - 0.5  # the whole run, the 1 s of plots included
+    run = json.loads((tmp_path / "sim1" / "run.json").read_text())
+    assert run["runtime_s"] >= run["track_s"] + 1.0
+
+
+def test_progress_bar_on_a_terminal_only(sim_mission_dir, tmp_path, monkeypatch):
+    import rafostrack.plots
+    import rafostrack.progress
+
+    monkeypatch.setattr(rafostrack.plots, "write_plots", _slow_plots(0.7))
+    args = ["track", str(sim_mission_dir / "sim1.csv"), "--out", str(tmp_path)]
+    quiet = CliRunner().invoke(main, args)
+    assert quiet.exit_code == 0 and "drawing plots" not in quiet.output  # not a terminal: no bar
+    monkeypatch.setattr(rafostrack.progress, "is_terminal", lambda stream: True)
+    shown = CliRunner().invoke(main, args)
+    assert shown.exit_code == 0, shown.output
+    for phase in rafostrack.progress.PHASES:
+        assert phase in shown.output
+    assert "sim1" in shown.output.splitlines()[-1]  # the summary line still ends the output
