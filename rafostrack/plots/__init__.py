@@ -33,11 +33,20 @@ def write_plots(
     outdir: Path, estimate: Estimate, beacons: BeaconTable, info: FloatInfo, model: ModelConfig, **extra: Any
 ) -> list[Path]:
     """Write track.png, arrivals.png and uncertainty.png of `estimate` into `outdir`; return
-    their paths. `extra` may give `truth` (a time, lat, lon frame, drawn on the map)."""
+    their paths. `extra` may give `truth` (a time, lat, lon frame, drawn on the map) and
+    `background` (a `track_map.Background` drawing map context, e.g. coastline and depth)."""
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     return [
-        plot_track(estimate.track, beacons, info, outdir / "track.png", truth=extra.get("truth"), modes=estimate.modes),
+        plot_track(
+            estimate.track,
+            beacons,
+            info,
+            outdir / "track.png",
+            truth=extra.get("truth"),
+            modes=estimate.modes,
+            background=extra.get("background"),
+        ),
         plot_arrivals(estimate.labels, estimate.track, beacons, info, model, outdir / "arrivals.png"),
         plot_uncertainty(estimate.track, outdir / "uncertainty.png"),
     ]

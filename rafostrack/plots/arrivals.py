@@ -28,6 +28,7 @@ from .base import (
     beacon_colors,
     date_axis,
     figure,
+    float_name,
     save_png,
 )
 
@@ -150,6 +151,6 @@ def _arrivals_title(info: FloatInfo, label_ids: NDArray[np.object_]) -> str:
     n = len(label_ids)
     n_clutter = int(sum(b is None for b in label_ids))
     return (
-        f"Float {info.float_id}: {n} stored TOAs, {n - n_clutter} assigned to beacons, {n_clutter} clutter"
+        f"{float_name(info.float_id)}: {n} stored TOAs, {n - n_clutter} assigned to beacons, {n_clutter} clutter"
         "\n(marker opacity = label probability; lines = predicted arrivals along the estimated track)"
     )

@@ -12,7 +12,7 @@ from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from ..estimates import runs_of
-from .base import _column, _float_id, _note, _times, date_axis, figure, save_png
+from .base import _column, _float_id, _note, _times, date_axis, figure, float_name, save_png
 
 
 def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
@@ -34,8 +34,13 @@ def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
             ax.grid(True, lw=0.4, alpha=0.5)
             for a, b in spans:
                 ax.axvspan(a - np.timedelta64(12, "h"), b + np.timedelta64(12, "h"), color="tab:red", alpha=0.15, lw=0)
-        if spans:
-            ax_sd.legend(handles=[Patch(color="tab:red", alpha=0.15, label="ambiguous (two modes)")], loc="upper right")
+        if spans:  # above the panels, off the data
+            fig.legend(
+                handles=[Patch(color="tab:red", alpha=0.15, label="ambiguous (two modes)")],
+                loc="outside upper right",
+                fontsize=8,
+                frameon=False,
+            )
         if len(times):
             pad = max((times.max() - times.min()) * 0.01, np.timedelta64(12, "h"))
             ax_ess.set_xlim(times.min() - pad, times.max() + pad)
@@ -46,7 +51,7 @@ def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
                 ax.set_yticks([])
             _note(ax_sd, "no track estimate")
         fid = _float_id(track)
-        ax_sd.set_title(f"Float {fid}: posterior uncertainty" if fid else "Posterior uncertainty")
+        ax_sd.set_title(f"{float_name(fid)}: posterior uncertainty" if fid else "Posterior uncertainty")
         return save_png(fig, path)
 
 
