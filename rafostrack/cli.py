@@ -77,7 +77,11 @@ def _set_debug(ctx: click.Context, _param: click.Parameter, value: bool) -> bool
 def debug_option(func):
     """`--debug` on a subcommand too (`rafostrack track F --debug`), as on the root."""
     return click.option(
-        "--debug", is_flag=True, expose_value=False, callback=_set_debug, help="Show tracebacks instead of one-line errors."
+        "--debug",
+        is_flag=True,
+        expose_value=False,
+        callback=_set_debug,
+        help="Show tracebacks instead of one-line errors.",
     )(func)
 
 
@@ -200,15 +204,36 @@ def main(debug: bool) -> None:
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @click.option("--no-smooth", is_flag=True, help="Filter only: no backward smoothing over the mission.")
 @click.option("--also-filtered", is_flag=True, help="Also write the filtered estimate (*_filtered.parquet).")
+@click.option(
+    "--format",
+    "output_format",
+    default="parquet",
+    show_default=True,
+    metavar="LIST",
+    help="Output formats, comma-separated: parquet, csv, netcdf (CF trajectory), rfc (ARTOA track text).",
+)
 @debug_option
 @_report_errors
 def track(
-    float_file, beacons, floats, launch, config_file, out_dir, no_plots, no_smooth, also_filtered, method, **flags
+    float_file,
+    beacons,
+    floats,
+    launch,
+    config_file,
+    out_dir,
+    no_plots,
+    no_smooth,
+    also_filtered,
+    method,
+    output_format,
+    **flags,
 ):
     """Label every TOA of FLOAT_FILE and estimate the float's track."""
+    from .io.output_formats import parse_formats
     from .pipeline import TrackInputs, track_float
 
     _refuse_method(method)
+    formats = parse_formats(output_format)
     inputs = TrackInputs(
         float_path=float_file,
         beacons_path=beacons,
@@ -221,7 +246,9 @@ def track(
 
     progress = progress_module.progress_for(sys.stderr, label=float_file.stem)
     try:
-        result = track_float(inputs, out_dir, plots=not no_plots, also_filtered=also_filtered, progress=progress)
+        result = track_float(
+            inputs, out_dir, plots=not no_plots, also_filtered=also_filtered, progress=progress, formats=formats
+        )
     finally:
         progress.close()
     for message in result.run["warnings"]:

@@ -21,7 +21,8 @@ from .domain import ArrivalRecord, BeaconTable, FloatInfo
 from .errors import InputError, Warnings, nearest
 from .io import read_arrivals, read_beacons, read_floats
 from .io.outdir import check_output_dir, staging_dir, swap_into_place
-from .io.writers import file_digest, write_json, write_parquet
+from .io.output_formats import write_estimate
+from .io.writers import file_digest, write_json
 from .method import track_record
 from .progress import NoProgress, Progress
 from .tracker import TrackOutput
@@ -148,12 +149,14 @@ def track_float(
     plots: bool = True,
     also_filtered: bool = False,
     progress: Progress | None = None,
+    formats: tuple[str, ...] = ("parquet",),
 ) -> TrackResult:
     """Track one float and write `out_root/<float_id>/`: Parquet tables, plots, run.json.
 
     `track.parquet`, `labels.parquet` and `modes.parquet` hold the smoothed estimate (the
     filtered one when the smoother is off; their metadata `estimate` says which);
-    `also_filtered` adds `*_filtered.parquet` beside them. The directory is built in a
+    `also_filtered` adds `*_filtered.parquet` beside them; `formats` chooses among parquet,
+    csv, netcdf and rfc (`io.output_formats`). The directory is built in a
     hidden sibling and swapped in whole (`io.outdir.swap_into_place`): it holds exactly
     this run's files, and a run that fails or is killed leaves the previous one untouched.
     `run.json`'s `runtime_s` covers the whole run, plots included.
@@ -177,7 +180,7 @@ def track_float(
             shutil.rmtree(staging)
         staging.mkdir(parents=True)
         progress.phase("writing outputs")
-        write_tables(staging, output, config, also_filtered=also_filtered)
+        write_tables(staging, output, config, loaded.info, also_filtered=also_filtered, formats=formats)
         if plots:
             progress.phase("drawing plots")
             from . import plots as plotting
@@ -192,9 +195,17 @@ def track_float(
     return TrackResult(loaded.info.float_id, final, output, run)
 
 
-def write_tables(out_dir: Path, output: TrackOutput, config: Config, *, also_filtered: bool = False) -> list[Path]:
-    """The estimate's tables (and the filtered ones when asked for) as Parquet, with the run's
-    metadata in each file's schema."""
+def write_tables(
+    out_dir: Path,
+    output: TrackOutput,
+    config: Config,
+    info: FloatInfo,
+    *,
+    also_filtered: bool = False,
+    formats: tuple[str, ...] = ("parquet",),
+) -> list[Path]:
+    """The estimate's tables (and the filtered ones when asked for) in each of `formats`
+    (`io.output_formats`), with the run's metadata."""
     estimates = [(output.estimate, "")]
     if also_filtered and output.filtered is not None and output.filtered is not output.estimate:
         estimates.append((output.filtered, "_filtered"))
@@ -208,10 +219,8 @@ def write_tables(out_dir: Path, output: TrackOutput, config: Config, *, also_fil
             "estimate": estimate.kind,
             "config": config.to_dict(),
         }
-        for name, frame in (("track", estimate.track), ("labels", estimate.labels), ("modes", estimate.modes)):
-            path = Path(out_dir) / f"{name}{suffix}.parquet"
-            write_parquet(frame, path, meta)
-            written.append(path)
+        tables = {"track": estimate.track, "labels": estimate.labels, "modes": estimate.modes}
+        written += write_estimate(out_dir, tables, info, formats, meta, suffix)
     return written
 
 

@@ -274,7 +274,10 @@ def test_cli_warnings_listed_in_run_json_and_stderr(sim_mission_dir, tmp_path):
 @pytest.mark.parametrize(
     ("args", "needle"),
     [
-        (["track", "{f}", "--particles", "10.5"], "track: invalid value for '--particles': '10.5' is not a valid integer. (see 'rafostrack track --help')"),
+        (
+            ["track", "{f}", "--particles", "10.5"],
+            "track: invalid value for '--particles': '10.5' is not a valid integer. (see 'rafostrack track --help')",
+        ),
         (["batch", "{m}", "--out", "{o}", "--jobs", "0"], "--jobs"),
         (["track", "{f}", "--bogus-option"], "track: no such option '--bogus-option'"),
         (["trak", "{f}"], "no such command 'trak'. did you mean 'track'? (see 'rafostrack --help')"),
