@@ -1,4 +1,4 @@
-"""Command-line interface: `rafostrack track`, `rafostrack batch` and `rafostrack simulate`.
+"""Command-line interface: `rafostrack track`, `batch`, `simulate` and `config`.
 
 Thin: parse options, call the pipeline, report. A user mistake (`InputError`) prints one
 line `rafostrack: error: ...` and exits with code 2; `--debug` shows the traceback.
@@ -330,3 +330,31 @@ def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots,
     )
     click.echo(result.summary)
     sys.exit(result.exit_code)
+
+
+@main.command("config")
+@click.argument("mission", required=False, type=click.Path(path_type=Path))
+@click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
+@config_options("likelihood", "engine", "motion", "particles", "seed", "clutter_rate", "p_detect", "toa_sigma_s")
+@debug_option
+@_report_errors
+def show_config(mission, config_file, **flags) -> None:
+    """Print the effective configuration for MISSION (a mission directory or a float file in
+    it; default: none, the package defaults), each key with the layer it came from."""
+    from .config_report import COMMAND_LINE, layered_config, render
+    from .errors import InputError
+    from .pipeline import MISSION_CONFIG
+
+    files: list[Path] = []
+    if mission is not None:
+        if not mission.exists():
+            raise InputError(f"{mission}: not found; expected a mission directory or a float file in one")
+        mission_toml = (mission if mission.is_dir() else mission.parent) / MISSION_CONFIG
+        if mission_toml.is_file():
+            files.append(mission_toml)
+    if config_file is not None:
+        files.append(config_file)
+    overrides = _overrides(**flags)
+    config, sources = layered_config(files, overrides)
+    names = ["default", *(str(p) for p in files), *([COMMAND_LINE] if overrides else [])]
+    click.echo(render(config, sources, names), nl=False)

@@ -19,7 +19,7 @@ from . import __version__
 from .config import Config, explicit_keys, load_config
 from .domain import ArrivalRecord, BeaconTable, FloatInfo
 from .errors import InputError, Warnings, nearest
-from .io import read_arrivals, read_beacons, read_floats
+from .io import float_id_of, read_arrivals, read_beacons, read_floats
 from .io.outdir import check_output_dir, staging_dir, swap_into_place
 from .io.output_formats import write_estimate
 from .io.writers import file_digest, write_json
@@ -41,6 +41,7 @@ class TrackInputs:
     launch: tuple[float, float] | None = None
     config_files: tuple[Path, ...] = ()
     overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
+    input_format: str | None = None  # the arrival file's reader (`rafostrack.io`); None: by file type
 
     @property
     def mission_dir(self) -> Path:
@@ -48,7 +49,7 @@ class TrackInputs:
 
     @property
     def float_id(self) -> str:
-        return self.float_path.stem
+        return float_id_of(self.float_path, self.input_format)
 
     def resolved_beacons(self) -> Path:
         return self.beacons_path or self.mission_dir / "beacons.csv"
@@ -84,11 +85,11 @@ def load_float(inputs: TrackInputs) -> LoadedFloat:
     floats_path = inputs.resolved_floats()
     if floats_path is None:  # --launch without floats.csv: launched at the first window
         info = _info_from_launch(inputs.float_id, inputs.launch, config)
-        record = read_arrivals(inputs.float_path, info, beacons, warnings)
+        record = read_arrivals(inputs.float_path, info, beacons, warnings, inputs.input_format)
         info = dataclasses.replace(info, launch_time=record.windows[0].time)
     else:
         info = _float_info(floats_path, inputs, config)
-        record = read_arrivals(inputs.float_path, info, beacons, warnings)
+        record = read_arrivals(inputs.float_path, info, beacons, warnings, inputs.input_format)
     if config.filter.likelihood == "labeled" and not record.has_labels:
         raise InputError(f"{inputs.float_path}: likelihood 'labeled' needs a 'beacon_id' column of known labels")
     explicit = frozenset(explicit_keys(inputs.config_layers(), inputs.overrides))

@@ -365,3 +365,30 @@ def test_progress_bar_on_a_terminal_only(sim_mission_dir, tmp_path, monkeypatch)
     for phase in rafostrack.progress.PHASES:
         assert phase in shown.output
     assert "sim1" in shown.output.splitlines()[-1]  # the summary line still ends the output
+
+
+def test_config_command_prints_the_merged_configuration_with_sources(sim_mission_dir, tmp_path):
+    """Issue 14 item 8: `rafostrack config [MISSION]`."""
+    import tomllib
+
+    from rafostrack.config import load_config
+
+    extra = tmp_path / "extra.toml"
+    extra.write_text("[filter]\nseed = 7\n")
+    args = ["config", str(sim_mission_dir), "--config", str(extra), "--p-detect", "0.6"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    mission_toml = str(sim_mission_dir / "rafostrack.toml")
+
+    def line(key: str) -> str:
+        return next(x for x in lines if x.startswith(f"{key} = "))
+
+    assert line("particles").endswith(f"# {mission_toml}")  # the mission's rafostrack.toml
+    assert line("seed").startswith("seed = 7") and line("seed").endswith(f"# {extra}")
+    assert line("p_detect").startswith("p_detect = 0.6") and line("p_detect").endswith("# command line")
+    assert line("resampling").endswith("# default")
+    expected = load_config([sim_mission_dir / "rafostrack.toml", extra], {"model": {"p_detect": 0.6}})
+    assert tomllib.loads(result.output) == expected.to_dict()  # valid TOML: usable as --config
+    bad = CliRunner().invoke(main, ["config", str(tmp_path / "nope")])
+    assert bad.exit_code == 2 and "rafostrack: error:" in bad.output

@@ -12,13 +12,17 @@ from typing import Any
 from ..config import ModelConfig
 from ..domain import BeaconTable, FloatInfo
 from ..estimates import Estimate
-from .arrivals import plot_arrivals
+from .arrivals import draw_arrivals, plot_arrivals
 from .base import beacon_colors, date_axis, figure, save_png
-from .track_map import plot_track
-from .uncertainty import plot_uncertainty
+from .track_map import Background, draw_track, plot_track
+from .uncertainty import draw_uncertainty, plot_uncertainty
 
 __all__ = [
+    "Background",
     "beacon_colors",
+    "draw_arrivals",
+    "draw_track",
+    "draw_uncertainty",
     "date_axis",
     "figure",
     "plot_arrivals",

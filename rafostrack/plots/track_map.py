@@ -21,6 +21,7 @@ from matplotlib import patheffects
 from matplotlib.axes import Axes
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
 from matplotlib.patches import Patch, Polygon
 from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
@@ -249,6 +250,21 @@ def plot_track(
     modes: pd.DataFrame | None = None,
     background: Background | None = None,
 ) -> Path:
+    """`draw_track` into a new figure, written as a PNG to `path`."""
+    with figure() as fig:
+        draw_track(fig, track, beacons, info, truth, modes, background)
+        return save_png(fig, path)
+
+
+def draw_track(
+    fig: Figure,
+    track: pd.DataFrame,
+    beacons: BeaconTable,
+    info: FloatInfo,
+    truth: pd.DataFrame | None = None,
+    modes: pd.DataFrame | None = None,
+    background: Background | None = None,
+) -> Figure:
     """Map of the estimated track coloured by time, with 95% ellipses, ambiguous positions and
     their second modes, beacons, fixes, a scale bar and optional truth; `background` draws
     map context under it (module docstring)."""
@@ -268,53 +284,52 @@ def plot_track(
     lat0, lat1, lon0, lon1 = frame
     coslat = max(np.cos(np.radians(0.5 * (lat0 + lat1))), 0.05)
     frame_width_km = (lon1 - lon0) * KM_PER_DEG * coslat
-    with figure() as fig:
-        ax = fig.add_subplot()
+    ax = fig.add_subplot()
+    ax.set_xlim(lon0, lon1)
+    ax.set_ylim(lat0, lat1)
+    ax.set_aspect(1.0 / coslat, adjustable="box")
+    if background is not None:  # the one seam for map context (coastline, depth)
+        background(ax, lat0, lat1, lon0, lon1)
         ax.set_xlim(lon0, lon1)
         ax.set_ylim(lat0, lat1)
-        ax.set_aspect(1.0 / coslat, adjustable="box")
-        if background is not None:  # the one seam for map context (coastline, depth)
-            background(ax, lat0, lat1, lon0, lon1)
-            ax.set_xlim(lon0, lon1)
-            ax.set_ylim(lat0, lat1)
-        handles: list[object] = []
-        if len(times):
-            tnum = mdates.date2num(times)
-            norm = _time_norm(tnum)
-            cmap = matplotlib.colormaps[TIME_CMAP]
-            colors = cmap(norm(tnum))
-            ax.plot(lon, lat, "-", color="0.55", lw=0.8, zorder=2)
-            ax.scatter(lon, lat, c=colors, s=10, zorder=3, label="estimated track")
-            drawn = _draw_ellipses(ax, track, times, lat, lon, colors, frame_width_km)
-            if drawn is not None:
-                step, factor = drawn
-                size = "" if factor == 1 else f", drawn ×{factor} enlarged"
-                handles.append(Patch(**_ellipse_colors(cmap(0.5)), label=f"95% ellipse (every {step:g} d{size})"))
-            _draw_modes(ax, track, modes, ref_lon)
-            if float(norm.vmax or 0.0) - float(norm.vmin or 0.0) > 1.0:  # a colour scale means nothing for one window
-                cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
-                date_ticks(cbar.ax.yaxis, times.min(), times.max())
-        else:
-            _note(ax, "no track estimate")
-        if truth is not None and len(truth):
-            tlon = _unwrap_lon(_column(truth, "lon"), ref_lon)
-            ax.plot(tlon, _column(truth, "lat"), "--", color="k", lw=1.2, zorder=4, label="truth")
-        _draw_beacons(ax, beacons, ref_lon, frame)
-        _draw_fixes(ax, info, ref_lon)
-        _draw_scale_bar(ax, frame)
-        ax.set_xlim(lon0, lon1)
-        ax.set_ylim(lat0, lat1)
-        ax.xaxis.set_major_formatter(FuncFormatter(lon_text))
-        ax.yaxis.set_major_formatter(FuncFormatter(lat_text))
-        ax.set_xlabel("longitude")
-        ax.set_ylabel("latitude")
-        ax.grid(True, lw=0.4, alpha=0.5)
-        legend_handles, _ = ax.get_legend_handles_labels()
-        all_handles = legend_handles + handles
-        fig.legend(handles=all_handles, loc="outside lower center", fontsize=8, frameon=False,
-                   ncols=min(len(all_handles), 4))  # fmt: skip
-        ax.set_title(map_title(info.float_id) + _span_text(times))
-        return save_png(fig, path)
+    handles: list[object] = []
+    if len(times):
+        tnum = mdates.date2num(times)
+        norm = _time_norm(tnum)
+        cmap = matplotlib.colormaps[TIME_CMAP]
+        colors = cmap(norm(tnum))
+        ax.plot(lon, lat, "-", color="0.55", lw=0.8, zorder=2)
+        ax.scatter(lon, lat, c=colors, s=10, zorder=3, label="estimated track")
+        drawn = _draw_ellipses(ax, track, times, lat, lon, colors, frame_width_km)
+        if drawn is not None:
+            step, factor = drawn
+            size = "" if factor == 1 else f", drawn ×{factor} enlarged"
+            handles.append(Patch(**_ellipse_colors(cmap(0.5)), label=f"95% ellipse (every {step:g} d{size})"))
+        _draw_modes(ax, track, modes, ref_lon)
+        if float(norm.vmax or 0.0) - float(norm.vmin or 0.0) > 1.0:  # a colour scale means nothing for one window
+            cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
+            date_ticks(cbar.ax.yaxis, times.min(), times.max())
+    else:
+        _note(ax, "no track estimate")
+    if truth is not None and len(truth):
+        tlon = _unwrap_lon(_column(truth, "lon"), ref_lon)
+        ax.plot(tlon, _column(truth, "lat"), "--", color="k", lw=1.2, zorder=4, label="truth")
+    _draw_beacons(ax, beacons, ref_lon, frame)
+    _draw_fixes(ax, info, ref_lon)
+    _draw_scale_bar(ax, frame)
+    ax.set_xlim(lon0, lon1)
+    ax.set_ylim(lat0, lat1)
+    ax.xaxis.set_major_formatter(FuncFormatter(lon_text))
+    ax.yaxis.set_major_formatter(FuncFormatter(lat_text))
+    ax.set_xlabel("longitude")
+    ax.set_ylabel("latitude")
+    ax.grid(True, lw=0.4, alpha=0.5)
+    legend_handles, _ = ax.get_legend_handles_labels()
+    all_handles = legend_handles + handles
+    fig.legend(handles=all_handles, loc="outside lower center", fontsize=8, frameon=False,
+               ncols=min(len(all_handles), 4))  # fmt: skip
+    ax.set_title(map_title(info.float_id) + _span_text(times))
+    return fig
 
 
 def _span_text(times: NDArray[np.datetime64]) -> str:
