@@ -86,7 +86,9 @@ class TrackRun:
         fig = Figure(figsize=base.FIGSIZE, dpi=base.DPI, layout="constrained")
         FigureCanvasAgg(fig)
         if kind == "track":
-            draw_track(fig, self.track, self.beacons, self.info, extra.get("truth"), self.modes, extra.get("background"))
+            draw_track(
+                fig, self.track, self.beacons, self.info, extra.get("truth"), self.modes, extra.get("background")
+            )
         elif kind == "arrivals":
             draw_arrivals(fig, self.labels, self.track, self.beacons, self.info, self.config.model)
         elif kind == "uncertainty":

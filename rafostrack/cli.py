@@ -205,6 +205,11 @@ def main(debug: bool) -> None:
 @click.option("--no-smooth", is_flag=True, help="Filter only: no backward smoothing over the mission.")
 @click.option("--also-filtered", is_flag=True, help="Also write the filtered estimate (*_filtered.parquet).")
 @click.option(
+    "--input-format",
+    type=click.Choice(["csv", "artoa-mat", "argo-aux"]),
+    help="The float file's format (default: by its name: *.csv, *.itm / rf*toa.mat, *_Rtraj_aux.nc).",
+)
+@click.option(
     "--format",
     "output_format",
     default="parquet",
@@ -226,6 +231,7 @@ def track(
     also_filtered,
     method,
     output_format,
+    input_format,
     **flags,
 ):
     """Label every TOA of FLOAT_FILE and estimate the float's track."""
@@ -241,6 +247,7 @@ def track(
         launch=launch,
         config_files=(config_file,) if config_file else (),
         overrides=_overrides(**flags, smooth=False if no_smooth else None),
+        input_format=input_format,
     )
     from . import progress as progress_module
 

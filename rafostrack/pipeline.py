@@ -7,6 +7,7 @@ to F; explicit paths and a launch position override them.
 from __future__ import annotations
 
 import dataclasses
+import re
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -52,7 +53,17 @@ class TrackInputs:
         return float_id_of(self.float_path, self.input_format)
 
     def resolved_beacons(self) -> Path:
-        return self.beacons_path or self.mission_dir / "beacons.csv"
+        """`--beacons`, else `beacons.csv` beside the float file, else an ARTOA `soso.dat` or
+        single `*.soso` there."""
+        if self.beacons_path is not None:
+            return self.beacons_path
+        default = self.mission_dir / "beacons.csv"
+        if not default.exists():
+            soso = [self.mission_dir / "soso.dat"] if (self.mission_dir / "soso.dat").is_file() else []
+            soso = soso or sorted(self.mission_dir.glob("*.soso"))
+            if len(soso) == 1:
+                return soso[0]
+        return default
 
     def resolved_floats(self) -> Path | None:
         path = self.floats_path or self.mission_dir / "floats.csv"
@@ -103,15 +114,28 @@ def _float_info(floats_path: Path, inputs: TrackInputs, config: Config) -> Float
             "beside the float file, or give --floats FILE, or --launch LAT,LON to start from a launch position"
         )
     floats = read_floats(floats_path, config.model)
-    if inputs.float_id not in floats:
+    float_id = _match_float_id(inputs.float_id, floats)
+    if float_id not in floats:
         raise InputError(
             f"{floats_path}: no row for float_id {inputs.float_id!r} (the arrival file's name)"
             f"{nearest(inputs.float_id, floats)}; known: {', '.join(sorted(floats)) or 'none'}"
         )
-    info = floats[inputs.float_id]
+    info = floats[float_id]
     if inputs.launch is not None:
         info = dataclasses.replace(info, launch_lat=inputs.launch[0], launch_lon=inputs.launch[1])
     return info
+
+
+def _match_float_id(name: str, floats: dict[str, FloatInfo]) -> str:
+    """`name` itself when floats.csv has it, else the one row whose id carries the same number
+    (`rf0767toa.mat` names float `767`, which finds `float767`), else `name`."""
+    if name in floats:
+        return name
+    digits = re.sub(r"\D", "", name)
+    if not digits:
+        return name
+    same = [f for f in floats if re.sub(r"\D", "", f) and int(re.sub(r"\D", "", f)) == int(digits)]
+    return same[0] if len(same) == 1 else name
 
 
 def _info_from_launch(float_id: str, launch: tuple[float, float] | None, config: Config) -> FloatInfo:

@@ -39,7 +39,9 @@ def quality_log_ratio(quality: ArrayLike, config: QualityConfig) -> NDArray[np.f
     q = np.asarray(quality, dtype=float)
     if not config.enabled:
         return np.zeros(q.shape)
-    ratio = _log_normal(q, config.source_mean, config.source_sd) - _log_normal(q, config.clutter_mean, config.clutter_sd)
+    ratio = _log_normal(q, config.source_mean, config.source_sd) - _log_normal(
+        q, config.clutter_mean, config.clutter_sd
+    )
     ratio = np.clip(ratio, -config.max_abs_log_ratio, config.max_abs_log_ratio)
     return np.where(np.isfinite(q), ratio, 0.0)
 

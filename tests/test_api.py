@@ -64,7 +64,9 @@ def test_unknown_option_suggests_the_key():
 
 
 def test_out_writes_what_the_cli_writes(sim_mission_dir, tmp_path):
-    r = rafostrack.track(sim_mission_dir / "sim1.csv", out=tmp_path, plots=False, particles=100, calibrate_enabled=False)
+    r = rafostrack.track(
+        sim_mission_dir / "sim1.csv", out=tmp_path, plots=False, particles=100, calibrate_enabled=False
+    )
     assert r.out_dir == tmp_path / "sim1"
     assert {p.name for p in r.out_dir.iterdir()} == {"track.parquet", "labels.parquet", "modes.parquet", "run.json"}
     pd.testing.assert_frame_equal(

@@ -319,7 +319,7 @@ def test_days_cuts_the_mission_consistently_at_the_simulated_track_end(tmp_path)
 
     result = CliRunner().invoke(main, ["simulate", str(tmp_path), "--scenario", "dimes", "--days", "60"])
     assert result.exit_code == 0, result.output
-    beacons, infos, records, _ = read_back(tmp_path, DEFAULT_MODEL)
+    _, infos, records, _ = read_back(tmp_path, DEFAULT_MODEL)
     full = {f.float_id: f for f in dimes_scenario()[1]}
     for fid, info in infos.items():
         truth = pd.read_csv(tmp_path / "truth" / f"{fid}.csv")

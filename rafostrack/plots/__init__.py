@@ -20,10 +20,10 @@ from .uncertainty import draw_uncertainty, plot_uncertainty
 __all__ = [
     "Background",
     "beacon_colors",
+    "date_axis",
     "draw_arrivals",
     "draw_track",
     "draw_uncertainty",
-    "date_axis",
     "figure",
     "plot_arrivals",
     "plot_track",
