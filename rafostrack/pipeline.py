@@ -7,6 +7,7 @@ to F; explicit paths and a launch position override them.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import re
 import shutil
 import time
@@ -192,13 +193,17 @@ def track_float(
     progress.phase("reading inputs")
     loaded = load_float(inputs)
     config = loaded.config
+    final = Path(out_root) / loaded.info.float_id
+    if final.exists() and not final.is_dir():  # never replace a user's file by a result directory
+        raise NotADirectoryError(
+            errno.ENOTDIR, "in the way of the float's output directory (not a directory)", str(final)
+        )
     progress.phase("tracking")
     output = track_record(
         loaded.beacons, loaded.info, config, loaded.record, also_filtered=also_filtered, explicit=loaded.explicit
     )
     track_s = time.perf_counter() - started
 
-    final = Path(out_root) / loaded.info.float_id
     staging = staging_dir(final)
     try:
         if staging.exists():
