@@ -1,4 +1,4 @@
-"""Command-line interface: `rafostrack track`, `rafostrack batch` and `rafostrack simulate`.
+"""Command-line interface: `rafostrack track`, `batch`, `simulate` and `config`.
 
 Thin: parse options, call the pipeline, report. A user mistake (`InputError`) prints one
 line `rafostrack: error: ...` and exits with code 2; `--debug` shows the traceback.
@@ -26,7 +26,7 @@ def _report_errors(func):
     def wrapper(*args, **kwargs):
         from .io.outdir import check_output_dir
 
-        debug = click.get_current_context().find_root().params.get("debug", False)
+        debug = _debug(click.get_current_context())
         out_dir = kwargs.get("out_dir")
         try:
             if out_dir is not None:
@@ -61,6 +61,62 @@ def _report_errors(func):
             sys.exit(1)
 
     return wrapper
+
+
+def _debug(ctx: click.Context) -> bool:
+    """Whether `--debug` was given, before or after the subcommand."""
+    return bool(ctx.find_root().params.get("debug", False) or ctx.meta.get("rafostrack.debug", False))
+
+
+def _set_debug(ctx: click.Context, _param: click.Parameter, value: bool) -> bool:
+    if value:
+        ctx.meta["rafostrack.debug"] = True
+    return value
+
+
+def debug_option(func):
+    """`--debug` on a subcommand too (`rafostrack track F --debug`), as on the root."""
+    return click.option(
+        "--debug",
+        is_flag=True,
+        expose_value=False,
+        callback=_set_debug,
+        help="Show tracebacks instead of one-line errors.",
+    )(func)
+
+
+class RafostrackGroup(click.Group):
+    """The root command. A usage error (a bad option value, an unknown option or command, a
+    missing argument) prints the documented one line `rafostrack: error: ...` and exits
+    with code 2, like every other user mistake; with `--debug`, click's full usage text."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):  # type: ignore[override]
+        argv = list(sys.argv[1:] if args is None else args)
+        try:
+            rv = super().main(argv, "rafostrack", complete_var, standalone_mode=False, **extra)
+        except click.ClickException as exc:
+            if "--debug" in argv:
+                exc.show()
+            else:
+                click.echo(f"rafostrack: error: {_usage_message(exc)}", err=True)
+            sys.exit(exc.exit_code)
+        except click.exceptions.Abort:
+            click.echo("rafostrack: aborted", err=True)
+            sys.exit(1)
+        if not standalone_mode:
+            return rv
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def _usage_message(exc: click.ClickException) -> str:
+    """One line: the command, click's message, and where to find the usage."""
+    message = " ".join(exc.format_message().split())
+    ctx = getattr(exc, "ctx", None)
+    if ctx is None:
+        return message
+    path = ctx.command_path
+    where = "" if ctx.parent is None else f"{path.split(' ', 1)[-1]}: "
+    return f"{where}{message} (see '{path} --help')"
 
 
 def _parse_launch(_ctx, _param, value: str | None) -> tuple[float, float] | None:
@@ -125,7 +181,7 @@ def _refuse_method(method: str | None) -> None:
         raise InputError(f"--method was split into two options: use --likelihood {likelihood} --engine {engine}")
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=RafostrackGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="rafostrack")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
 def main(debug: bool) -> None:
@@ -148,14 +204,42 @@ def main(debug: bool) -> None:
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @click.option("--no-smooth", is_flag=True, help="Filter only: no backward smoothing over the mission.")
 @click.option("--also-filtered", is_flag=True, help="Also write the filtered estimate (*_filtered.parquet).")
+@click.option(
+    "--input-format",
+    type=click.Choice(["csv", "artoa-mat", "argo-aux"]),
+    help="The float file's format (default: by its name: *.csv, *.itm / rf*toa.mat, *_Rtraj_aux.nc).",
+)
+@click.option(
+    "--format",
+    "output_format",
+    default="parquet",
+    show_default=True,
+    metavar="LIST",
+    help="Output formats, comma-separated: parquet, csv, netcdf (CF trajectory), rfc (ARTOA track text).",
+)
+@debug_option
 @_report_errors
 def track(
-    float_file, beacons, floats, launch, config_file, out_dir, no_plots, no_smooth, also_filtered, method, **flags
+    float_file,
+    beacons,
+    floats,
+    launch,
+    config_file,
+    out_dir,
+    no_plots,
+    no_smooth,
+    also_filtered,
+    method,
+    output_format,
+    input_format,
+    **flags,
 ):
     """Label every TOA of FLOAT_FILE and estimate the float's track."""
+    from .io.output_formats import parse_formats
     from .pipeline import TrackInputs, track_float
 
     _refuse_method(method)
+    formats = parse_formats(output_format)
     inputs = TrackInputs(
         float_path=float_file,
         beacons_path=beacons,
@@ -163,8 +247,17 @@ def track(
         launch=launch,
         config_files=(config_file,) if config_file else (),
         overrides=_overrides(**flags, smooth=False if no_smooth else None),
+        input_format=input_format,
     )
-    result = track_float(inputs, out_dir, plots=not no_plots, also_filtered=also_filtered)
+    from . import progress as progress_module
+
+    progress = progress_module.progress_for(sys.stderr, label=float_file.stem)
+    try:
+        result = track_float(
+            inputs, out_dir, plots=not no_plots, also_filtered=also_filtered, progress=progress, formats=formats
+        )
+    finally:
+        progress.close()
     for message in result.run["warnings"]:
         click.echo(f"rafostrack: warning: {message}", err=True)
     if result.run["warnings"]:
@@ -189,6 +282,7 @@ def track(
 )
 @config_options("clutter_rate", "p_detect", "toa_sigma_s")
 @click.option("--config", "config_file", type=click.Path(path_type=Path), help="TOML with a [model] table.")
+@debug_option
 @_report_errors
 def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> None:
     """Write a simulated mission (inputs plus truth/) to OUT_DIR."""
@@ -220,6 +314,7 @@ def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> N
 @config_options("likelihood", "engine", "motion")
 @click.option("--method", hidden=True, help="Removed: see --likelihood and --engine.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
+@debug_option
 @_report_errors
 def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots, **flags) -> None:
     """Track every float of the mission directories under ROOTs, skipping unchanged ones.
@@ -242,3 +337,31 @@ def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots,
     )
     click.echo(result.summary)
     sys.exit(result.exit_code)
+
+
+@main.command("config")
+@click.argument("mission", required=False, type=click.Path(path_type=Path))
+@click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
+@config_options("likelihood", "engine", "motion", "particles", "seed", "clutter_rate", "p_detect", "toa_sigma_s")
+@debug_option
+@_report_errors
+def show_config(mission, config_file, **flags) -> None:
+    """Print the effective configuration for MISSION (a mission directory or a float file in
+    it; default: none, the package defaults), each key with the layer it came from."""
+    from .config_report import COMMAND_LINE, layered_config, render
+    from .errors import InputError
+    from .pipeline import MISSION_CONFIG
+
+    files: list[Path] = []
+    if mission is not None:
+        if not mission.exists():
+            raise InputError(f"{mission}: not found; expected a mission directory or a float file in one")
+        mission_toml = (mission if mission.is_dir() else mission.parent) / MISSION_CONFIG
+        if mission_toml.is_file():
+            files.append(mission_toml)
+    if config_file is not None:
+        files.append(config_file)
+    overrides = _overrides(**flags)
+    config, sources = layered_config(files, overrides)
+    names = ["default", *(str(p) for p in files), *([COMMAND_LINE] if overrides else [])]
+    click.echo(render(config, sources, names), nl=False)

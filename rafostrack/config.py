@@ -159,6 +159,19 @@ class BPConfig:
 
 
 @dataclass(frozen=True)
+class QualityConfig:
+    """Correlation height (the arrival file's `quality`) as evidence of source vs clutter
+    (`rafostrack.quality`): Gaussian class-conditional densities of the height."""
+
+    enabled: bool = setting()
+    source_mean: float = setting()
+    source_sd: float = setting("> 0", _positive)
+    clutter_mean: float = setting()
+    clutter_sd: float = setting("> 0", _positive)
+    max_abs_log_ratio: float = setting("> 0", _positive)
+
+
+@dataclass(frozen=True)
 class Config:
     model: ModelConfig
     motion: MotionConfig
@@ -169,6 +182,7 @@ class Config:
     smoother: SmootherConfig
     ambiguity: AmbiguityConfig
     bp: BPConfig
+    quality: QualityConfig
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return asdict(self)

@@ -105,6 +105,7 @@ class Window:
     time: np.datetime64
     toa_s: NDArray[np.float64]
     beacon_id: tuple[str | None, ...] | None = None  # known labels (None entry = clutter)
+    quality: NDArray[np.float64] | None = None  # correlation height per TOA (NaN = none), if the file has it
 
     @property
     def n_signals(self) -> int:

@@ -7,6 +7,9 @@ to F; explicit paths and a launch position override them.
 from __future__ import annotations
 
 import dataclasses
+import errno
+import re
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,10 +21,12 @@ from . import __version__
 from .config import Config, explicit_keys, load_config
 from .domain import ArrivalRecord, BeaconTable, FloatInfo
 from .errors import InputError, Warnings, nearest
-from .io import read_arrivals, read_beacons, read_floats
-from .io.outdir import check_output_dir
-from .io.writers import file_digest, write_json, write_parquet
+from .io import float_id_of, read_arrivals, read_beacons, read_floats
+from .io.outdir import check_output_dir, staging_dir, swap_into_place
+from .io.output_formats import write_estimate
+from .io.writers import file_digest, write_json
 from .method import track_record
+from .progress import NoProgress, Progress
 from .tracker import TrackOutput
 
 MISSION_CONFIG = "rafostrack.toml"
@@ -38,6 +43,7 @@ class TrackInputs:
     launch: tuple[float, float] | None = None
     config_files: tuple[Path, ...] = ()
     overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
+    input_format: str | None = None  # the arrival file's reader (`rafostrack.io`); None: by file type
 
     @property
     def mission_dir(self) -> Path:
@@ -45,10 +51,20 @@ class TrackInputs:
 
     @property
     def float_id(self) -> str:
-        return self.float_path.stem
+        return float_id_of(self.float_path, self.input_format)
 
     def resolved_beacons(self) -> Path:
-        return self.beacons_path or self.mission_dir / "beacons.csv"
+        """`--beacons`, else `beacons.csv` beside the float file, else an ARTOA `soso.dat` or
+        single `*.soso` there."""
+        if self.beacons_path is not None:
+            return self.beacons_path
+        default = self.mission_dir / "beacons.csv"
+        if not default.exists():
+            soso = [self.mission_dir / "soso.dat"] if (self.mission_dir / "soso.dat").is_file() else []
+            soso = soso or sorted(self.mission_dir.glob("*.soso"))
+            if len(soso) == 1:
+                return soso[0]
+        return default
 
     def resolved_floats(self) -> Path | None:
         path = self.floats_path or self.mission_dir / "floats.csv"
@@ -81,11 +97,11 @@ def load_float(inputs: TrackInputs) -> LoadedFloat:
     floats_path = inputs.resolved_floats()
     if floats_path is None:  # --launch without floats.csv: launched at the first window
         info = _info_from_launch(inputs.float_id, inputs.launch, config)
-        record = read_arrivals(inputs.float_path, info, beacons, warnings)
+        record = read_arrivals(inputs.float_path, info, beacons, warnings, inputs.input_format)
         info = dataclasses.replace(info, launch_time=record.windows[0].time)
     else:
         info = _float_info(floats_path, inputs, config)
-        record = read_arrivals(inputs.float_path, info, beacons, warnings)
+        record = read_arrivals(inputs.float_path, info, beacons, warnings, inputs.input_format)
     if config.filter.likelihood == "labeled" and not record.has_labels:
         raise InputError(f"{inputs.float_path}: likelihood 'labeled' needs a 'beacon_id' column of known labels")
     explicit = frozenset(explicit_keys(inputs.config_layers(), inputs.overrides))
@@ -93,16 +109,34 @@ def load_float(inputs: TrackInputs) -> LoadedFloat:
 
 
 def _float_info(floats_path: Path, inputs: TrackInputs, config: Config) -> FloatInfo:
+    if not floats_path.exists():
+        raise InputError(
+            f"{floats_path}: file not found; expected a float table (float_id, launch_time, launch_lat, launch_lon) "
+            "beside the float file, or give --floats FILE, or --launch LAT,LON to start from a launch position"
+        )
     floats = read_floats(floats_path, config.model)
-    if inputs.float_id not in floats:
+    float_id = _match_float_id(inputs.float_id, floats)
+    if float_id not in floats:
         raise InputError(
             f"{floats_path}: no row for float_id {inputs.float_id!r} (the arrival file's name)"
             f"{nearest(inputs.float_id, floats)}; known: {', '.join(sorted(floats)) or 'none'}"
         )
-    info = floats[inputs.float_id]
+    info = floats[float_id]
     if inputs.launch is not None:
         info = dataclasses.replace(info, launch_lat=inputs.launch[0], launch_lon=inputs.launch[1])
     return info
+
+
+def _match_float_id(name: str, floats: dict[str, FloatInfo]) -> str:
+    """`name` itself when floats.csv has it, else the one row whose id carries the same number
+    (`rf0767toa.mat` names float `767`, which finds `float767`), else `name`."""
+    if name in floats:
+        return name
+    digits = re.sub(r"\D", "", name)
+    if not digits:
+        return name
+    same = [f for f in floats if re.sub(r"\D", "", f) and int(re.sub(r"\D", "", f)) == int(digits)]
+    return same[0] if len(same) == 1 else name
 
 
 def _info_from_launch(float_id: str, launch: tuple[float, float] | None, config: Config) -> FloatInfo:
@@ -134,26 +168,78 @@ class TrackResult:
     run: dict[str, Any]
 
 
-def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also_filtered: bool = False) -> TrackResult:
+def track_float(
+    inputs: TrackInputs,
+    out_root: Path,
+    *,
+    plots: bool = True,
+    also_filtered: bool = False,
+    progress: Progress | None = None,
+    formats: tuple[str, ...] = ("parquet",),
+) -> TrackResult:
     """Track one float and write `out_root/<float_id>/`: Parquet tables, plots, run.json.
 
     `track.parquet`, `labels.parquet` and `modes.parquet` hold the smoothed estimate (the
     filtered one when the smoother is off; their metadata `estimate` says which);
-    `also_filtered` adds `*_filtered.parquet` beside them.
+    `also_filtered` adds `*_filtered.parquet` beside them; `formats` chooses among parquet,
+    csv, netcdf and rfc (`io.output_formats`). The directory is built in a
+    hidden sibling and swapped in whole (`io.outdir.swap_into_place`): it holds exactly
+    this run's files, and a run that fails or is killed leaves the previous one untouched.
+    `run.json`'s `runtime_s` covers the whole run, plots included.
     """
     started = time.perf_counter()
+    progress = progress or NoProgress()
     check_output_dir(Path(out_root))
+    progress.phase("reading inputs")
     loaded = load_float(inputs)
     config = loaded.config
+    final = Path(out_root) / loaded.info.float_id
+    if final.exists() and not final.is_dir():  # never replace a user's file by a result directory
+        raise NotADirectoryError(
+            errno.ENOTDIR, "in the way of the float's output directory (not a directory)", str(final)
+        )
+    progress.phase("tracking")
     output = track_record(
         loaded.beacons, loaded.info, config, loaded.record, also_filtered=also_filtered, explicit=loaded.explicit
     )
-    elapsed = time.perf_counter() - started
+    track_s = time.perf_counter() - started
 
-    out_dir = Path(out_root) / loaded.info.float_id
+    staging = staging_dir(final)
+    try:
+        if staging.exists():
+            shutil.rmtree(staging)
+        staging.mkdir(parents=True)
+        progress.phase("writing outputs")
+        write_tables(staging, output, config, loaded.info, also_filtered=also_filtered, formats=formats)
+        if plots:
+            progress.phase("drawing plots")
+            from . import plots as plotting
+
+            plotting.write_plots(staging, output.estimate, loaded.beacons, loaded.info, config.model)
+        run = run_record(inputs, loaded, output, time.perf_counter() - started)
+        run["track_s"] = round(track_s, 3)
+        write_json(staging / "run.json", run)
+        swap_into_place(staging, final)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return TrackResult(loaded.info.float_id, final, output, run)
+
+
+def write_tables(
+    out_dir: Path,
+    output: TrackOutput,
+    config: Config,
+    info: FloatInfo,
+    *,
+    also_filtered: bool = False,
+    formats: tuple[str, ...] = ("parquet",),
+) -> list[Path]:
+    """The estimate's tables (and the filtered ones when asked for) in each of `formats`
+    (`io.output_formats`), with the run's metadata."""
     estimates = [(output.estimate, "")]
     if also_filtered and output.filtered is not None and output.filtered is not output.estimate:
         estimates.append((output.filtered, "_filtered"))
+    written = []
     for estimate, suffix in estimates:
         meta = {
             "version": __version__,
@@ -163,16 +249,9 @@ def track_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True, also
             "estimate": estimate.kind,
             "config": config.to_dict(),
         }
-        write_parquet(estimate.track, out_dir / f"track{suffix}.parquet", meta)
-        write_parquet(estimate.labels, out_dir / f"labels{suffix}.parquet", meta)
-        write_parquet(estimate.modes, out_dir / f"modes{suffix}.parquet", meta)
-    if plots:
-        from .plots import write_plots
-
-        write_plots(out_dir, output.estimate, loaded.beacons, loaded.info, config.model)
-    run = run_record(inputs, loaded, output, elapsed)
-    write_json(out_dir / "run.json", run)
-    return TrackResult(loaded.info.float_id, out_dir, output, run)
+        tables = {"track": estimate.track, "labels": estimate.labels, "modes": estimate.modes}
+        written += write_estimate(out_dir, tables, info, formats, meta, suffix)
+    return written
 
 
 def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, elapsed_s: float) -> dict[str, Any]:

@@ -15,6 +15,10 @@ fix, a bridge then adds a constant extra mean current c, which with the same noi
 the track by c (t - t_launch), found by fixed-point iteration (c += miss / duration) until
 the track ends within 1 mm of the end fix; the last point is then set to the fix.
 
+When `days` ends the windows before the end fix, the mission is cut there
+(`end_at_last_window`): the truth at the last window becomes the end fix, so a written
+mission is consistent (its end fix is where its record stops).
+
 Windows. One per day at the launch's time of day, from the day after launch up to (not
 beyond) the end time, and at most `days` of them. The float's position in a window is the
 truth at the window time. In each window, for each beacon active then
@@ -43,6 +47,7 @@ labels and the truth beside it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -112,8 +117,29 @@ def simulate_mission(
     for info in floats:
         truth = simulate_drift(info, rng, eddy_speed_km_per_day, eddy_timescale_days, days)
         record, arrivals = simulate_arrivals(beacons, info, model, truth, rng, days=days)
+        if days is not None:
+            info, truth = end_at_last_window(info, truth, record)
         out.append(SimulatedFloat(info, record, truth, arrivals))
     return SimulatedMission(beacons, out, model, float(eddy_speed_km_per_day), float(eddy_timescale_days))
+
+
+def end_at_last_window(info: FloatInfo, truth: pd.DataFrame, record: ArrivalRecord) -> tuple[FloatInfo, pd.DataFrame]:
+    """A float whose windows stop before its end fix (`days` cut the mission short) ends at
+    its last window instead: the truth is cut there and becomes the end fix, and the end clock
+    offset is the linear clock model's value then. Otherwise `info` and `truth` unchanged."""
+    if not (info.has_end_fix and record.windows) or record.windows[-1].time >= info.end_time:
+        return info, truth
+    end = np.datetime64(record.windows[-1].time).astype("datetime64[ns]")
+    kept = truth[truth["time"].to_numpy(dtype="datetime64[ns]") <= end].reset_index(drop=True)
+    last = kept.iloc[-1]
+    new = dataclasses.replace(
+        info,
+        end_time=end,
+        end_lat=float(last["lat"]),
+        end_lon=float(last["lon"]),
+        clock_offset_end_s=float(info.clock_offset_s(end)),
+    )
+    return new, kept
 
 
 def _track_times(info: FloatInfo, days: int | None) -> NDArray[np.datetime64]:

@@ -31,3 +31,11 @@ def sim_mission() -> SimulatedMission:
     """One synthetic float, 60 days, clutter 1 per window: the tracker's own model."""
     beacons, floats = synthetic_scenario(days=60, rng=7)
     return simulate_mission(beacons, floats, load_config().model, np.random.default_rng(7))
+
+
+@pytest.fixture(scope="session")
+def quality_mission(sim_mission_dir, tmp_path_factory) -> Path:
+    """The simulated mission with a correlation height (`quality`) per TOA."""
+    from field_files import mission_with_quality
+
+    return mission_with_quality(sim_mission_dir, tmp_path_factory.mktemp("qmission") / "m")

@@ -265,3 +265,130 @@ def test_cli_warnings_listed_in_run_json_and_stderr(sim_mission_dir, tmp_path):
     printed = [line for line in result.stderr.splitlines() if line.startswith("rafostrack: warning: ")]
     assert printed == [f"rafostrack: warning: {w}" for w in run["warnings"]]
     assert f"rafostrack: {len(run['warnings'])} warning(s), also listed in {out / 'sim1' / 'run.json'}" in result.stderr
+
+
+# --------------------------------------------------------------------------------------
+# Issue 14 item 7: usage errors are the documented one line too
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (
+            ["track", "{f}", "--particles", "10.5"],
+            "track: invalid value for '--particles': '10.5' is not a valid integer. (see 'rafostrack track --help')",
+        ),
+        (["batch", "{m}", "--out", "{o}", "--jobs", "0"], "--jobs"),
+        (["track", "{f}", "--bogus-option"], "track: no such option '--bogus-option'"),
+        (["trak", "{f}"], "no such command 'trak'. did you mean 'track'? (see 'rafostrack --help')"),
+        (["track"], "missing argument 'FLOAT_FILE'"),
+    ],
+)
+def test_usage_errors_are_one_line_and_exit_2(mission_dir, tmp_path, args, needle):
+    subs = {"{f}": str(_float_file(mission_dir)), "{m}": str(mission_dir), "{o}": str(tmp_path / "o")}
+    args = [subs.get(a, a) for a in args]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rafostrack: error: "), result.output
+    assert needle.lower() in lines[0].lower()
+    assert "Usage:" not in result.output
+
+
+def test_debug_after_the_subcommand(sim_mission_dir, tmp_path):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    (m / "floats.csv").write_text("")
+    result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(tmp_path / "out"), "--debug"])
+    assert isinstance(result.exception, InputError) and "file is empty" in str(result.exception)
+
+
+def test_missing_column_suggestion_goes_from_the_typo_to_the_name(sim_mission_dir, tmp_path):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    text = (m / "sim1.csv").read_text().replace("time,toa_s,", "time,toa,", 1)
+    (m / "sim1.csv").write_text(text)
+    result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert "missing required column 'toa_s'" in result.output
+    assert "did you mean 'toa_s'?" in result.output and "did you mean 'toa'?" not in result.output
+
+
+def test_missing_floats_csv_names_launch(sim_mission_dir, tmp_path):
+    m = copy_mission(sim_mission_dir, tmp_path / "m")
+    (m / "floats.csv").unlink()
+    result = CliRunner().invoke(main, ["track", str(m / "sim1.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert "floats.csv: file not found" in result.output and "--launch LAT,LON" in result.output
+
+
+# --------------------------------------------------------------------------------------
+# Issue 14 item 4: progress on a terminal; the printed time includes the plots
+
+
+def _slow_plots(seconds: float):
+    import time
+
+    def write_plots(outdir, *args, **kwargs):
+        time.sleep(seconds)
+        return []
+
+    return write_plots
+
+
+def test_printed_time_includes_the_plots(sim_mission_dir, tmp_path, monkeypatch):
+    import re
+    import time
+
+    import rafostrack.plots
+
+    monkeypatch.setattr(rafostrack.plots, "write_plots", _slow_plots(1.0))
+    started = time.perf_counter()
+    result = CliRunner().invoke(main, ["track", str(sim_mission_dir / "sim1.csv"), "--out", str(tmp_path)])
+    wall = time.perf_counter() - started
+    assert result.exit_code == 0, result.output
+    printed = float(re.search(r", ([0-9.]+) s -> ", result.output).group(1))
+    assert printed >= wall - 0.5  # the whole run, the 1 s of plots included
+    run = json.loads((tmp_path / "sim1" / "run.json").read_text())
+    assert run["runtime_s"] >= run["track_s"] + 1.0
+
+
+def test_progress_bar_on_a_terminal_only(sim_mission_dir, tmp_path, monkeypatch):
+    import rafostrack.plots
+    import rafostrack.progress
+
+    monkeypatch.setattr(rafostrack.plots, "write_plots", _slow_plots(0.7))
+    args = ["track", str(sim_mission_dir / "sim1.csv"), "--out", str(tmp_path)]
+    quiet = CliRunner().invoke(main, args)
+    assert quiet.exit_code == 0 and "drawing plots" not in quiet.output  # not a terminal: no bar
+    monkeypatch.setattr(rafostrack.progress, "is_terminal", lambda stream: True)
+    shown = CliRunner().invoke(main, args)
+    assert shown.exit_code == 0, shown.output
+    for phase in rafostrack.progress.PHASES:
+        assert phase in shown.output
+    assert "sim1" in shown.output.splitlines()[-1]  # the summary line still ends the output
+
+
+def test_config_command_prints_the_merged_configuration_with_sources(sim_mission_dir, tmp_path):
+    """Issue 14 item 8: `rafostrack config [MISSION]`."""
+    import tomllib
+
+    from rafostrack.config import load_config
+
+    extra = tmp_path / "extra.toml"
+    extra.write_text("[filter]\nseed = 7\n")
+    args = ["config", str(sim_mission_dir), "--config", str(extra), "--p-detect", "0.6"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    mission_toml = str(sim_mission_dir / "rafostrack.toml")
+
+    def line(key: str) -> str:
+        return next(x for x in lines if x.startswith(f"{key} = "))
+
+    assert line("particles").endswith(f"# {mission_toml}")  # the mission's rafostrack.toml
+    assert line("seed").startswith("seed = 7") and line("seed").endswith(f"# {extra}")
+    assert line("p_detect").startswith("p_detect = 0.6") and line("p_detect").endswith("# command line")
+    assert line("resampling").endswith("# default")
+    expected = load_config([sim_mission_dir / "rafostrack.toml", extra], {"model": {"p_detect": 0.6}})
+    assert tomllib.loads(result.output) == expected.to_dict()  # valid TOML: usable as --config
+    bad = CliRunner().invoke(main, ["config", str(tmp_path / "nope")])
+    assert bad.exit_code == 2 and "rafostrack: error:" in bad.output

@@ -159,3 +159,21 @@ def test_report_from_summaries(outdir):
     for line in text.splitlines():
         if line.startswith("!["):
             assert (outdir / line.split("](")[1].rstrip(")")).is_file()
+
+
+def test_quick_mode_is_the_full_method_only_smaller():
+    """Issue 14 item 2: `make figures-quick` showed the method failing (fewer particles than the
+    method needs) where the full run reproduced the paper. Quick mode now cuts replication
+    (repeats, clutter levels, seeds) and record length only: every per-run setting the method's
+    behaviour depends on (particles, trajectory, clutter, seeds) is the full run's."""
+    from rafostrack.experiments.ranked.trajectory import LINE, SPIRAL
+
+    for fig in (LINE, SPIRAL):
+        assert fig.quick == fig.full
+    assert fig6b_clutter.QUICK.particles == fig6b_clutter.FULL.particles
+    assert fig6b_clutter.QUICK.days == fig6b_clutter.FULL.days
+    assert set(fig6b_clutter.QUICK.lambdas) <= set(fig6b_clutter.FULL.lambdas)
+    assert 2 <= fig6b_clutter.QUICK.repeats <= fig6b_clutter.FULL.repeats
+    for module in (fig7_8_floats, fig12_ambiguity):
+        assert module.QUICK.particles == module.FULL.particles
+    assert fig12_ambiguity.QUICK.seeds >= 2

@@ -533,7 +533,7 @@ def test_recoverable_oddities_are_warned_not_silent(tmp_path):
 @pytest.mark.parametrize(
     ("text", "needle"),
     [
-        ("beacon_id,lat,lng\nA,1,2\n", "missing required column 'lon' (did you mean 'lng'?)"),
+        ("beacon_id,lat,lng\nA,1,2\n", "missing required column 'lon' (the header has 'lng': did you mean 'lon'?)"),
         ("beacon_id;lat;lon\nA;1;2\n", "separated by ';'"),
         ("beacon_id,lat,lon\n", "header only"),
         ("", "file is empty"),

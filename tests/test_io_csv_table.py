@@ -49,7 +49,10 @@ def test_header_only(tmp_path):
 def test_missing_required_column_suggests_nearest(tmp_path):
     path = write(tmp_path / "floats.csv", "float_id,launch_time,launch_lt,launch_lon\nf1,2009-01-01,-57,-98\n")
     message = error_of(read_floats, path, MODEL)
-    assert "floats.csv: line 1: missing required column 'launch_lat' (did you mean 'launch_lt'?)" in message
+    assert (
+        "floats.csv: line 1: missing required column 'launch_lat' "
+        "(the header has 'launch_lt': did you mean 'launch_lat'?)" in message
+    )
     with pytest.raises(InputError, match=r"f1\.csv: line 1: unknown column 'toa' \(did you mean 'toa_s'\?\)"):
         read_small(tmp_path, "time,toa_s,toa\n2009-01-02,1,2\n")
 

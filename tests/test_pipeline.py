@@ -39,3 +39,37 @@ def test_same_inputs_sameparquet_bytes(sim_mission_dir, tmp_path):
     assert {"track.parquet", "labels.parquet"} <= set(a) and a == b
     run_a, run_b = (json.loads((tmp_path / n / "sim1" / "run.json").read_text()) for n in ("a", "b"))
     assert "runtime_s" in run_a and timing_free(run_a) == timing_free(run_b)
+
+
+def _names(directory) -> set[str]:
+    return {p.name for p in directory.iterdir()}
+
+
+def test_rerun_leaves_only_the_current_runs_files_atomically(sim_mission_dir, tmp_path, monkeypatch):
+    """Issue 14 item 3: a rerun into the same directory left the previous run's files (an old
+    track_filtered.parquet, old PNGs) beside the new ones. The float directory is now built
+    beside the old one and swapped in whole; a run that fails leaves the old one untouched."""
+    import rafostrack.plots
+
+    float_file = str(sim_mission_dir / "sim1.csv")
+    out = tmp_path / "out"
+    first = CliRunner().invoke(main, ["track", float_file, "--out", str(out), "--also-filtered", "--no-smooth"])
+    assert first.exit_code == 0, first.output
+    old = {p.name: p.read_bytes() for p in (out / "sim1").iterdir()}
+    assert {"track.png", "track.parquet"} <= set(old)
+
+    # A rerun that fails half-way (while drawing plots) leaves the previous result whole.
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full while drawing")
+
+    monkeypatch.setattr(rafostrack.plots, "write_plots", broken)
+    failed = CliRunner().invoke(main, ["track", float_file, "--out", str(out), "--particles", "150"])
+    assert failed.exit_code == 1
+    assert {p.name: p.read_bytes() for p in (out / "sim1").iterdir()} == old
+    assert _names(out) == {"sim1"}  # no staging or trash directory left behind
+    monkeypatch.undo()
+
+    rerun = CliRunner().invoke(main, ["track", float_file, "--out", str(out), "--no-plots", "--particles", "150"])
+    assert rerun.exit_code == 0, rerun.output
+    assert _names(out / "sim1") == {"track.parquet", "labels.parquet", "modes.parquet", "run.json"}
+    assert _names(out) == {"sim1"}

@@ -160,3 +160,204 @@ def test_beacon_colors_distinct_and_not_grey():
     rgb = {c[:3] for c in colors.values()}
     assert len(rgb) == 18
     assert all(not (r == g == b) for r, g, b in rgb)
+
+
+# --------------------------------------------------------------------------------------
+# Issue 14 item 5: the map and the other plots, read back from the drawn figure
+
+
+def _capture(monkeypatch, module):
+    """Replace `module.save_png` by one that draws the figure, keeps a snapshot, and saves."""
+    from matplotlib.collections import Collection
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Polygon
+    from matplotlib.text import Annotation
+
+    shots: list[dict] = []
+    original = module.save_png
+
+    def save(fig, path):
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        ax = fig.axes[0]
+        shot = {
+            "title": ax.get_title(),
+            "xlim": ax.get_xlim(),
+            "ylim": ax.get_ylim(),
+            "xticks": [t.get_text() for t in ax.get_xticklabels() if t.get_text()],
+            "yticks": [t.get_text() for t in ax.get_yticklabels() if t.get_text()],
+            "ellipses": [p for p in ax.patches if isinstance(p, Polygon)],
+            "ellipse_px": [p.get_window_extent(renderer) for p in ax.patches if isinstance(p, Polygon)],
+            "labels": [a for a in ax.texts if isinstance(a, Annotation)],
+            "texts": [t.get_text() for t in ax.texts],
+            "track_zorder": max(
+                [a.get_zorder() for a in [*ax.lines, *ax.collections] if isinstance(a, Line2D | Collection)] or [0]
+            ),
+            "scalebar": [a for a in [*ax.lines, *ax.texts] if a.get_gid() == "scalebar"],
+            "legends": [
+                (lg, lg.get_window_extent(renderer)) for lg in [*fig.legends, *(a.get_legend() for a in fig.axes)] if lg
+            ],
+            "axes_px": [a.get_window_extent(renderer) for a in fig.axes],
+            "cbar_ticks": [t.get_text() for a in fig.axes[1:] for t in a.get_yticklabels() if t.get_text()],
+            "fig": fig,
+        }
+        shots.append(shot)
+        return original(fig, path)
+
+    monkeypatch.setattr(module, "save_png", save)
+    return shots
+
+
+def test_map_degree_labels_title_frame_and_scale_bar(tmp_path, monkeypatch, beacons, info):
+    import rafostrack.plots.track_map as track_map
+
+    shots = _capture(monkeypatch, track_map)
+    named = FloatInfo(**{**info.__dict__, "float_id": "float767"})
+    track = make_track(30).assign(float_id="float767")
+    far = BeaconTable(**{**beacons.__dict__, "lat": beacons.lat * 1.0, "lon": beacons.lon - 20.0})  # far west
+    track_map.plot_track(track, far, named, tmp_path / "track.png")
+    shot = shots[-1]
+    assert all(t.endswith("°W") for t in shot["xticks"]) and all(t.endswith("°S") for t in shot["yticks"])
+    assert "Float float767" not in shot["title"] and shot["title"].startswith("float767")
+    # The frame is the track's (plus a margin), not the beacons' (they are 20° further west).
+    lon0, lon1 = shot["xlim"]
+    assert lon0 > -100 and lon1 < -88 and lon0 < -96 and lon1 > -91.5
+    assert shot["scalebar"] and any(t.endswith(" km") for t in shot["texts"])
+    bar = next(a for a in shot["scalebar"] if hasattr(a, "get_xdata"))
+    km = float(next(t for t in shot["texts"] if t.endswith(" km")).split()[0])
+    x = bar.get_xdata()
+    lat = float(np.mean(bar.get_ydata()))
+    assert abs(x[1] - x[0]) * 111.2 * np.cos(np.radians(lat)) == pytest.approx(km, rel=0.01)
+
+
+def test_map_ellipses_visible_with_a_matching_legend_patch(tmp_path, monkeypatch, beacons, info):
+    import rafostrack.plots.track_map as track_map
+
+    shots = _capture(monkeypatch, track_map)
+    track = make_track(60, sd=0.3)  # sub-km uncertainty on a ~500 km track
+    track = track.assign(lon=-96.0 + 0.12 * np.arange(60), smaj_km=0.4, smin_km=0.2, angle_deg=30.0)
+    track_map.plot_track(track, beacons, info, tmp_path / "track.png")
+    shot = shots[-1]
+    assert shot["ellipses"]
+    assert min(max(b.width, b.height) for b in shot["ellipse_px"]) >= 4.0  # visible on the PNG
+    patch = next(h for lg, _ in shot["legends"] for h in lg.legend_handles if "95%" in (h.get_label() or ""))
+    first = shot["ellipses"][0]
+    assert patch.get_facecolor()[3] == pytest.approx(first.get_facecolor()[3])
+    assert patch.get_edgecolor()[3] == pytest.approx(first.get_edgecolor()[3])
+    assert patch.get_linewidth() == pytest.approx(first.get_linewidth())
+    assert "enlarged" in patch.get_label()  # sub-km ellipses are drawn enlarged, and say so
+
+
+def test_map_beacon_labels_above_the_track(tmp_path, monkeypatch, beacons, info):
+    import rafostrack.plots.track_map as track_map
+
+    shots = _capture(monkeypatch, track_map)
+    track_map.plot_track(make_track(30), beacons, info, tmp_path / "track.png")
+    shot = shots[-1]
+    labels = [a for a in shot["labels"] if a.get_text() in {"S1", "S2", "S3", "S4"}]
+    assert labels and min(a.get_zorder() for a in labels) > shot["track_zorder"]
+
+
+@pytest.mark.parametrize(("days", "fmt"), [(14, "%d %b"), (700, "%b %Y")])
+def test_map_date_colourbar_ticks(tmp_path, monkeypatch, beacons, info, days, fmt):
+    import datetime as dt
+
+    import rafostrack.plots.track_map as track_map
+
+    shots = _capture(monkeypatch, track_map)
+    track = make_track(days + 1)
+    track_map.plot_track(track, beacons, info, tmp_path / "track.png")
+    ticks = shots[-1]["cbar_ticks"]
+    assert 3 <= len(ticks) <= 9 and len(set(ticks)) == len(ticks)
+    for text in ticks:
+        dt.datetime.strptime(text, fmt)  # every tick is a plain date
+
+
+def test_map_background_seam_gets_the_frame(tmp_path, monkeypatch, beacons, info):
+    import rafostrack.plots.track_map as track_map
+
+    shots = _capture(monkeypatch, track_map)
+    calls = []
+
+    def background(ax, lat_min, lat_max, lon_min, lon_max):
+        calls.append((lat_min, lat_max, lon_min, lon_max))
+        ax.axhspan(lat_min, lat_max, color="0.9", zorder=0)
+
+    track_map.plot_track(make_track(30), beacons, info, tmp_path / "track.png", background=background)
+    ((lat_min, lat_max, lon_min, lon_max),) = calls
+    assert (lon_min, lon_max) == pytest.approx(shots[-1]["xlim"]) and (lat_min, lat_max) == pytest.approx(
+        shots[-1]["ylim"]
+    )
+
+
+def _srgb_to_lab(rgb: np.ndarray) -> np.ndarray:
+    lin = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    m = np.array(
+        [[0.4124564, 0.3575761, 0.1804375], [0.2126729, 0.7151522, 0.0721750], [0.0193339, 0.1191920, 0.9503041]]
+    )
+    xyz = lin @ m.T / np.array([0.95047, 1.0, 1.08883])
+    f = np.where(xyz > 216 / 24389, np.cbrt(xyz), (24389 / 27 * xyz + 16) / 116)
+    return np.stack([116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1)
+
+
+def _ciede2000(lab1: np.ndarray, lab2: np.ndarray) -> float:
+    """CIEDE2000 colour difference (Sharma, Wu and Dalal 2005)."""
+    (l1, a1, b1), (l2, a2, b2) = lab1, lab2
+    cbar = (np.hypot(a1, b1) + np.hypot(a2, b2)) / 2
+    g = 0.5 * (1 - np.sqrt(cbar**7 / (cbar**7 + 25**7)))
+    a1p, a2p = (1 + g) * a1, (1 + g) * a2
+    c1p, c2p = np.hypot(a1p, b1), np.hypot(a2p, b2)
+    h1p, h2p = np.degrees(np.arctan2(b1, a1p)) % 360, np.degrees(np.arctan2(b2, a2p)) % 360
+    dh = 0.0 if c1p * c2p == 0 else (h2p - h1p + 180) % 360 - 180
+    dhp = 2 * np.sqrt(c1p * c2p) * np.sin(np.radians(dh / 2))
+    lbp, cbp = (l1 + l2) / 2, (c1p + c2p) / 2
+    if c1p * c2p == 0:
+        hbp = h1p + h2p
+    elif abs(h1p - h2p) <= 180:
+        hbp = (h1p + h2p) / 2
+    else:
+        hbp = (h1p + h2p + (360 if h1p + h2p < 360 else -360)) / 2
+    t = (1 - 0.17 * np.cos(np.radians(hbp - 30)) + 0.24 * np.cos(np.radians(2 * hbp))
+         + 0.32 * np.cos(np.radians(3 * hbp + 6)) - 0.2 * np.cos(np.radians(4 * hbp - 63)))  # fmt: skip
+    rc = 2 * np.sqrt(cbp**7 / (cbp**7 + 25**7))
+    sl = 1 + 0.015 * (lbp - 50) ** 2 / np.sqrt(20 + (lbp - 50) ** 2)
+    sc, sh = 1 + 0.045 * cbp, 1 + 0.015 * cbp * t
+    rt = -np.sin(np.radians(60 * np.exp(-(((hbp - 275) / 25) ** 2)))) * rc
+    dl, dc = (l2 - l1) / sl, (c2p - c1p) / sc
+    return float(np.sqrt(dl**2 + dc**2 + (dhp / sh) ** 2 + rt * dc * (dhp / sh)))
+
+
+def test_ciede2000_oracle_matches_published_pairs():
+    # Sharma, Wu and Dalal (2005), table 1, pairs 1 and 17.
+    assert _ciede2000(np.array([50.0, 2.6772, -79.7751]), np.array([50.0, 0.0, -82.7485])) == pytest.approx(
+        2.0425, abs=1e-4
+    )
+    assert _ciede2000(np.array([50.0, 2.5, 0.0]), np.array([73.0, 25.0, -18.0])) == pytest.approx(27.1492, abs=1e-4)
+
+
+def test_twenty_beacon_colours_are_told_apart():
+    """Issue 14 item 5: beacons sharing tab20's light/dark pairs were hard to tell apart. Every
+    two of the first 20 beacon colours, and each against the clutter grey and the white
+    background, differ by at least 20 CIEDE2000 units (tab20's own pairs: 12)."""
+    from matplotlib.colors import to_rgb
+
+    from rafostrack.plots.base import CLUTTER_COLOR
+
+    colors = beacon_colors([f"B{i}" for i in range(20)])
+    labs = [_srgb_to_lab(np.array(c[:3])) for c in colors.values()]
+    refs = [_srgb_to_lab(np.array(to_rgb(CLUTTER_COLOR))), _srgb_to_lab(np.ones(3))]
+    pairs = [_ciede2000(a, b) for i, a in enumerate(labs) for b in labs[i + 1 :]]
+    assert min(pairs) >= 20.0
+    assert min(_ciede2000(a, r) for a in labs for r in refs) >= 20.0
+
+
+def test_uncertainty_legend_off_the_data(tmp_path, monkeypatch):
+    import rafostrack.plots.uncertainty as uncertainty
+
+    shots = _capture(monkeypatch, uncertainty)
+    track = make_track(40).assign(ambiguous=np.arange(40) % 10 < 3)
+    uncertainty.plot_uncertainty(track, tmp_path / "u.png")
+    shot = shots[-1]
+    assert shot["legends"]
+    for _, box in shot["legends"]:
+        assert not any(box.overlaps(ax) for ax in shot["axes_px"])

@@ -17,7 +17,7 @@ from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
 from rafostrack.io.mission_writer import write_mission
 from rafostrack.model import predicted_arrivals
 from rafostrack.scenarios import dimes_scenario, synthetic_scenario
-from rafostrack.simulate import SimulatedMission, simulate_mission, summarize
+from rafostrack.simulate import SimulatedMission, simulate_drift, simulate_mission, summarize
 
 DEFAULT_MODEL = load_config().model
 NAT = np.datetime64("NaT", "ns")
@@ -236,7 +236,7 @@ def test_truth_runs_from_launch_to_end_fix():
     info = floats[0]
     # Also a mission that does not last a whole number of days.
     half = dataclasses.replace(info, float_id="half", end_time=info.end_time - np.timedelta64(13, "h"))
-    mission = simulate_mission(beacons, [info, half], DEFAULT_MODEL, np.random.default_rng(12), days=3)
+    mission = simulate_mission(beacons, [info, half], DEFAULT_MODEL, np.random.default_rng(12))
     for sf in mission.floats:
         truth, f = sf.truth, sf.info
         assert truth["time"].iloc[0] == f.launch_time and truth["time"].iloc[-1] == f.end_time
@@ -245,18 +245,14 @@ def test_truth_runs_from_launch_to_end_fix():
         assert range_m(truth["lat"].iloc[-1], truth["lon"].iloc[-1], f.end_lat, f.end_lon) < 1.0
         steps = range_m(truth["lat"][:-1], truth["lon"][:-1], truth["lat"][1:], truth["lon"][1:])
         assert steps.max() < 60e3  # daily steps, no jumps
-        assert len(sf.record.windows) == 3  # `days` caps the windows, not the truth
     assert len(mission.floats[1].truth) == len(mission.floats[0].truth)  # 728 days + the last 11 h
     assert (mission.floats[1].truth["time"].diff().iloc[-1]) == pd.Timedelta(hours=11)
 
 
 def test_eddy_velocity_has_the_stated_sd_and_timescale():
-    beacons, floats = synthetic_scenario(days=4000, rng=1)
-    sf = simulate_mission(
-        beacons, floats, DEFAULT_MODEL, np.random.default_rng(13),
-        eddy_speed_km_per_day=4.0, eddy_timescale_days=10.0, days=1,
-    ).floats[0]  # fmt: skip
-    lat, lon = sf.truth["lat"].to_numpy(), sf.truth["lon"].to_numpy()
+    _, floats = synthetic_scenario(days=4000, rng=1)
+    truth = simulate_drift(floats[0], np.random.default_rng(13), eddy_speed_km_per_day=4.0, eddy_timescale_days=10.0)
+    lat, lon = truth["lat"].to_numpy(), truth["lon"].to_numpy()
     east, north = local_offsets_km(lat[1:], lon[1:], lat[:-1], lon[:-1])
     for v in (east, north):
         fluct = v - v.mean()
@@ -312,3 +308,25 @@ def test_summary_columns():
     assert list(table["float_id"]) == ["sim1", "sim2", "noend"]
     assert (table["windows"] == 25).all()
     assert ((table["clutter_fraction"] >= 0) & (table["clutter_fraction"] <= 1)).all()
+
+
+def test_days_cuts_the_mission_consistently_at_the_simulated_track_end(tmp_path):
+    """Issue 14 item 6: `simulate --scenario dimes --days 60` kept the real end fix two years
+    later, so every float's end fix lay hundreds of km from where its record stops."""
+    from click.testing import CliRunner
+
+    from rafostrack.cli import main
+
+    result = CliRunner().invoke(main, ["simulate", str(tmp_path), "--scenario", "dimes", "--days", "60"])
+    assert result.exit_code == 0, result.output
+    _, infos, records, _ = read_back(tmp_path, DEFAULT_MODEL)
+    full = {f.float_id: f for f in dimes_scenario()[1]}
+    for fid, info in infos.items():
+        truth = pd.read_csv(tmp_path / "truth" / f"{fid}.csv")
+        last_window = records[fid].windows[-1].time
+        assert info.end_time == last_window == full[fid].launch_time + np.timedelta64(60, "D")
+        assert pd.Timestamp(truth["time"].iloc[-1]).tz_localize(None) == pd.Timestamp(last_window)
+        assert range_m(truth["lat"].iloc[-1], truth["lon"].iloc[-1], info.end_lat, info.end_lon) < 1.0
+        # the float clock keeps its linear model: the end offset is the one at the new end
+        expected = full[fid].clock_offset_s(np.datetime64(info.end_time))
+        assert info.clock_offset_end_s == pytest.approx(float(expected), abs=0.01)

@@ -31,6 +31,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import InputError
+from ..io.outdir import swap_into_place
 from ..io.writers import write_json
 from .lock import read_lock_info
 from .plan import FAILED, MANIFEST, MANIFEST_FORMAT, PROCESSED, FloatOutcome, FloatTask
@@ -111,17 +112,3 @@ def check_run_holds_lock(task: FloatTask) -> None:
     holder = read_lock_info(task.lock_info_path)
     if holder is None or holder.get("run_id") != task.run_id:
         raise RuntimeError(f"{task.lock_info_path}: this batch run no longer holds the lock; outputs not installed")
-
-
-def swap_into_place(new: Path, final: Path) -> None:
-    """Replace `final` by `new` with renames: old -> trash, new -> final, delete trash."""
-    trash = final.parent / f".{final.name}.trash-{os.getpid()}"
-    if trash.exists():
-        shutil.rmtree(trash)
-    if final.exists() or final.is_symlink():
-        os.rename(final, trash)
-    os.rename(new, final)
-    if trash.is_dir() and not trash.is_symlink():
-        shutil.rmtree(trash, ignore_errors=True)
-    elif trash.exists() or trash.is_symlink():
-        trash.unlink()

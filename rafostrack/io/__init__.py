@@ -21,7 +21,7 @@ from typing import Any, Literal
 from ..config import ModelConfig
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from ..errors import InputError, Warnings, nearest
-from . import csv_mission
+from . import argo_aux, artoa_mat, artoa_soso, csv_mission
 
 Kind = Literal["beacons", "floats", "arrivals"]
 
@@ -101,3 +101,24 @@ def _suffix(*suffixes: str) -> Callable[[Path], bool]:
 register_reader(Reader("beacons", "csv", "beacons.csv", _suffix(".csv"), csv_mission.read_beacons))
 register_reader(Reader("floats", "csv", "floats.csv", _suffix(".csv"), csv_mission.read_floats))
 register_reader(Reader("arrivals", "csv", "<float_id>.csv", _suffix(".csv"), csv_mission.read_arrivals))
+register_reader(Reader("beacons", "artoa-soso", "ARTOA soso.dat / *.soso", artoa_soso.matches, artoa_soso.read_beacons))
+register_reader(
+    Reader(
+        "arrivals",
+        "artoa-mat",
+        "ARTOA/DIMES interim MATLAB *.itm, rf*toa.mat",
+        artoa_mat.matches,
+        artoa_mat.read_arrivals,
+        artoa_mat.float_id,
+    )
+)
+register_reader(
+    Reader(
+        "arrivals",
+        "argo-aux",
+        "Argo auxiliary trajectory *_Rtraj_aux.nc",
+        argo_aux.matches,
+        argo_aux.read_arrivals,
+        argo_aux.float_id,
+    )
+)

@@ -178,6 +178,7 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
     require_present(path, frame, "time", "the window's opening time (ISO-8601)")
     times = parse_time_column(path, frame, "time")
     toa = parse_float_column(path, frame, "toa_s")
+    quality = parse_float_column(path, frame, "quality") if "quality" in frame.columns else None
     lines = frame.index.to_numpy()
     labelled = "beacon_id" in frame.columns
     labels = frame["beacon_id"].to_numpy(dtype=object) if labelled else None
@@ -264,8 +265,12 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
     if labels is not None:
         lab_groups = np.split(labels[order][stored], splits)
         label_tuples = [tuple(lab if lab else None for lab in g) for g in lab_groups]
+    quality_groups: list[NDArray[np.float64] | None] = [None] * n_win
+    if quality is not None:
+        quality_groups = list(np.split(quality[order][stored], splits))
     windows = tuple(
-        Window(time=t, toa_s=g, beacon_id=lab) for t, g, lab in zip(win_times, toa_groups, label_tuples, strict=True)
+        Window(time=t, toa_s=g, beacon_id=lab, quality=q)
+        for t, g, lab, q in zip(win_times, toa_groups, label_tuples, quality_groups, strict=True)
     )
     return ArrivalRecord(float_id=info.float_id, path=path, windows=windows)
 

@@ -93,9 +93,12 @@ def _check_header(path: Path, header: list[str], line: int, required: tuple[str,
             raise InputError(
                 f"{where}: column {i + 1} has no name (a trailing comma?); expected only the columns {', '.join(known)}"
             )
+    unknown = [c for c in header if c not in known]
     for col in required:
         if col not in header:
-            raise InputError(f"{where}: missing required column {col!r}{nearest(col, header)}")
+            typo = nearest(col, unknown).removeprefix(" (did you mean ").removesuffix("?)")
+            hint = f" (the header has {typo}: did you mean {col!r}?)" if typo else ""
+            raise InputError(f"{where}: missing required column {col!r}{hint}")
     for col in header:
         if col not in known:
             hint = nearest(col, known) or f" (expected only {', '.join(known)})"

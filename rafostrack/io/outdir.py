@@ -24,3 +24,28 @@ def check_output_dir(path: Path) -> None:
             f"{path}: output directory is not writable ({probe} denies write access); "
             "expected --out to name a writable directory"
         )
+
+
+def staging_dir(final: Path) -> Path:
+    """A hidden sibling of `final` to build a new `final` in (`swap_into_place` installs it)."""
+    final = Path(final)
+    return final.parent / f".{final.name}.tmp-{os.getpid()}"
+
+
+def swap_into_place(new: Path, final: Path) -> None:
+    """Replace the directory `final` by `new` with renames: old -> trash, new -> final, delete
+    trash. A reader sees the old directory or the new one, never a mixture, whenever the
+    process is killed (a killed run leaves at most a hidden staging or trash sibling)."""
+    import shutil
+
+    new, final = Path(new), Path(final)
+    trash = final.parent / f".{final.name}.trash-{os.getpid()}"
+    if trash.exists():
+        shutil.rmtree(trash)
+    if final.exists() or final.is_symlink():
+        os.rename(final, trash)
+    os.rename(new, final)
+    if trash.is_dir() and not trash.is_symlink():
+        shutil.rmtree(trash, ignore_errors=True)
+    elif trash.exists() or trash.is_symlink():
+        trash.unlink()

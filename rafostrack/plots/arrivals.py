@@ -28,6 +28,7 @@ from .base import (
     beacon_colors,
     date_axis,
     figure,
+    float_name,
     save_png,
 )
 
@@ -67,6 +68,15 @@ def plot_arrivals(
     model: ModelConfig,
     path: Path,
 ) -> Path:
+    """`draw_arrivals` into a new figure, written as a PNG to `path`."""
+    with figure() as fig:
+        draw_arrivals(fig, labels, track, beacons, info, model)
+        return save_png(fig, path)
+
+
+def draw_arrivals(
+    fig: Figure, labels: pd.DataFrame, track: pd.DataFrame, beacons: BeaconTable, info: FloatInfo, model: ModelConfig
+) -> Figure:
     """Stored TOAs against time coloured by assigned beacon, with predicted arrival curves."""
     ids = [str(b) for b in beacons.beacon_id]
     label_ids = _label_ids(labels)
@@ -77,27 +87,26 @@ def plot_arrivals(
     counts = pd.Series(label_ids[~clutter]).value_counts().to_dict()
     ptimes, pred = _predicted(track, beacons, info, model)
     shown = _beacons_to_show(ids, counts, pred, info.window_s)
-    with figure() as fig:
-        ax = fig.add_subplot()
-        handles: list[Line2D] = []
-        marker = "_" if len(ptimes) == 1 else ""  # a one-point curve is drawn as a tick
-        for k in shown:
-            b = ids[k]
-            ax.plot(ptimes, pred[:, k], "-", marker=marker, ms=12, color=colors[b], lw=1.0, alpha=0.8, zorder=2)
-            handles.append(_scatter_beacon(ax, ltimes, toa, prob, label_ids == b, colors[b], b))
-        for b in extra:
-            handles.append(_scatter_beacon(ax, ltimes, toa, prob, label_ids == b, colors[b], b))
-        if clutter.any():
-            handles.append(_scatter_clutter(ax, ltimes[clutter], toa[clutter], prob[clutter]))
-        if shown:
-            handles.append(Line2D([], [], color="k", lw=1.0, label="predicted TOA\n(estimated track)"))
-        if not len(labels):
-            _note(ax, "no arrival times stored")
-        _arrivals_axes(ax, info, ltimes, ptimes)
-        ax.set_title(_arrivals_title(info, label_ids))
-        if handles:
-            _arrivals_legend(fig, handles)
-        return save_png(fig, path)
+    ax = fig.add_subplot()
+    handles: list[Line2D] = []
+    marker = "_" if len(ptimes) == 1 else ""  # a one-point curve is drawn as a tick
+    for k in shown:
+        b = ids[k]
+        ax.plot(ptimes, pred[:, k], "-", marker=marker, ms=12, color=colors[b], lw=1.0, alpha=0.8, zorder=2)
+        handles.append(_scatter_beacon(ax, ltimes, toa, prob, label_ids == b, colors[b], b))
+    for b in extra:
+        handles.append(_scatter_beacon(ax, ltimes, toa, prob, label_ids == b, colors[b], b))
+    if clutter.any():
+        handles.append(_scatter_clutter(ax, ltimes[clutter], toa[clutter], prob[clutter]))
+    if shown:
+        handles.append(Line2D([], [], color="k", lw=1.0, label="predicted TOA\n(estimated track)"))
+    if not len(labels):
+        _note(ax, "no arrival times stored")
+    _arrivals_axes(ax, info, ltimes, ptimes)
+    ax.set_title(_arrivals_title(info, label_ids))
+    if handles:
+        _arrivals_legend(fig, handles)
+    return fig
 
 
 def _arrivals_legend(fig: Figure, handles: list[Line2D]) -> None:
@@ -150,6 +159,6 @@ def _arrivals_title(info: FloatInfo, label_ids: NDArray[np.object_]) -> str:
     n = len(label_ids)
     n_clutter = int(sum(b is None for b in label_ids))
     return (
-        f"Float {info.float_id}: {n} stored TOAs, {n - n_clutter} assigned to beacons, {n_clutter} clutter"
+        f"{float_name(info.float_id)}: {n} stored TOAs, {n - n_clutter} assigned to beacons, {n_clutter} clutter"
         "\n(marker opacity = label probability; lines = predicted arrivals along the estimated track)"
     )

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import matplotlib
 import matplotlib.dates as mdates
+import matplotlib.ticker
 import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
@@ -27,12 +28,18 @@ from ..io.atomic import atomic_path
 FIGSIZE = (10.0, 6.0)
 DPI = 120
 KM_PER_DEG = 111.2
-MAX_BEACONS_ALL = 8  # show every beacon on the map when there are at most this many
 SD_CIRCLES = 12  # about this many uncertainty ellipses along the track
 CLUTTER_COLOR = "0.45"
 TIME_CMAP = "viridis"
-# tab20 without its greys (reserved for clutter): the ten strong hues, then the light ones.
-_TAB20_ORDER = [i for i in range(0, 20, 2) if i != 14] + [i for i in range(1, 20, 2) if i != 15]
+# 20 beacon colours told apart: every two of them, and each against the clutter grey and a
+# white background, differ by at least 20 CIEDE2000 units (tab20's light/dark pairs: 12).
+# Chosen greedily (each the sRGB colour on a 13-level grid farthest, in CIEDE2000, from those
+# already chosen, the grey and white; greys, very dark and very light colours excluded),
+# starting from matplotlib's default blue.
+BEACON_PALETTE = (
+    "#1580bf", "#5500aa", "#00d400", "#ff6aff", "#ff9500", "#800000", "#ff4055", "#005500", "#00bfbf", "#808000",
+    "#aa2a6a", "#554015", "#aabfff", "#806abf", "#d4bf00", "#00806a", "#00406a", "#ffaabf", "#aa6a40", "#80aa80",
+)  # fmt: skip
 
 Color = tuple[float, float, float, float]
 
@@ -57,9 +64,43 @@ def save_png(fig: Figure, path: Path) -> Path:
 
 
 def beacon_colors(ids: Sequence[str]) -> dict[str, Color]:
-    """A distinct tab20 colour per beacon id (no greys), cycling beyond 18 beacons."""
-    cmap = matplotlib.colormaps["tab20"]
-    return {b: cmap(_TAB20_ORDER[k % len(_TAB20_ORDER)]) for k, b in enumerate(ids)}
+    """A distinct colour per beacon id (`BEACON_PALETTE`: no greys), cycling beyond 20 beacons."""
+    return {b: to_rgba(BEACON_PALETTE[k % len(BEACON_PALETTE)]) for k, b in enumerate(ids)}
+
+
+def degree_text(value: float, positive: str, negative: str) -> str:
+    """'58.5°S', '105°W', '0°': a coordinate in degrees with its hemisphere letter."""
+    value = round(float(value), 4) + 0.0
+    letter = "" if value == 0 else positive if value > 0 else negative
+    return f"{abs(value):g}°{letter}"
+
+
+def lon_text(lon: float, _pos: object = None) -> str:
+    """A longitude label, wrapped into [-180, 180) first."""
+    return degree_text((float(lon) + 180.0) % 360.0 - 180.0, "E", "W")
+
+
+def lat_text(lat: float, _pos: object = None) -> str:
+    return degree_text(lat, "N", "S")
+
+
+def date_ticks(axis: Axis, first: np.datetime64, last: np.datetime64) -> None:
+    """Plain date ticks at whole days, months or years, about 4 to 8 of them over
+    [first, last]: '03 Jan' within a few months, 'Jan 2010' within a few years, '2010' beyond."""
+    days = max(float((last - first) / np.timedelta64(1, "D")), 1.0)
+    locator: mdates.DateLocator
+    if days <= 90:
+        step = next(s for s in (1, 2, 3, 5, 7, 14, 21, 30) if days / s <= 7)
+        locator, fmt = mdates.DayLocator(interval=step), "%d %b"
+    elif days <= 5 * 365:
+        months = days / 30.44
+        step = next(s for s in (1, 2, 3, 4, 6, 12) if months / s <= 7)
+        locator, fmt = mdates.MonthLocator(interval=step), "%b %Y"
+    else:
+        locator, fmt = mdates.YearLocator(base=max(1, int(np.ceil(days / 365.25 / 7)))), "%Y"
+    axis.set_major_locator(locator)
+    axis.set_major_formatter(mdates.DateFormatter(fmt))
+    axis.set_minor_locator(matplotlib.ticker.NullLocator())
 
 
 def date_axis(axis: Axis) -> None:
@@ -81,6 +122,11 @@ def _column(frame: pd.DataFrame, col: str) -> NDArray[np.float64]:
     if col not in frame.columns:
         return np.full(len(frame), np.nan)
     return pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=float)
+
+
+def float_name(float_id: str) -> str:
+    """'float767' as is (an id already saying 'float' is not repeated), 'F01' as 'Float F01'."""
+    return float_id if float_id.lower().startswith("float") else f"Float {float_id}"
 
 
 def _float_id(track: pd.DataFrame, default: str = "") -> str:

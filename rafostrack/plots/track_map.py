@@ -1,7 +1,15 @@
-"""`track.png`: the track on a map with uncertainty ellipses, modes, beacons and fixes."""
+"""`track.png`: the track on a map with uncertainty ellipses, modes, beacons, fixes and a scale bar.
+
+The frame is fitted to the track, the launch and end fixes (and the truth, when drawn) plus a
+margin, not to the beacon array: beacons outside it are marked on its edge, towards where
+they are. Ticks read as degrees with hemisphere letters (105°W, 58°S). Map context
+(coastline, depth) comes through one seam: `plot_track(..., background=...)` is called once
+with the frame before anything else is drawn (`Background`).
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -9,18 +17,21 @@ import matplotlib
 import matplotlib.dates as mdates
 import numpy as np
 import pandas as pd
+from matplotlib import patheffects
 from matplotlib.axes import Axes
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
-from matplotlib.lines import Line2D
+from matplotlib.figure import Figure
 from matplotlib.patches import Patch, Polygon
+from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
 
 from ..domain import BeaconTable, FloatInfo
 from ..posterior import ELLIPSE_95_SCALE
 from .base import (
+    DPI,
+    FIGSIZE,
     KM_PER_DEG,
-    MAX_BEACONS_ALL,
     SD_CIRCLES,
     TIME_CMAP,
     _column,
@@ -28,28 +39,47 @@ from .base import (
     _reference_lon,
     _times,
     _unwrap_lon,
-    date_axis,
+    date_ticks,
     figure,
+    float_name,
+    lat_text,
+    lon_text,
     save_png,
 )
 
+# Draws map context under the data: (axes, lat_min, lat_max, lon_min, lon_max), the frame in
+# degrees as drawn (longitudes within 180° of the track's, so they may pass ±180 at the dateline).
+Background = Callable[[Axes, float, float, float, float], None]
 
-def _select_beacons(beacons: BeaconTable, lat: NDArray, lon: NDArray, margin_km: float = 600.0) -> NDArray[np.bool_]:
-    """Beacons to draw: all if few, else those within a margin (km) of the points' extent."""
-    if len(beacons) <= MAX_BEACONS_ALL or not np.isfinite(lat).any():
-        return np.ones(len(beacons), dtype=bool)
-    lat0, lat1 = np.nanmin(lat), np.nanmax(lat)
-    lon0, lon1 = np.nanmin(lon), np.nanmax(lon)
-    coslat = max(np.cos(np.radians(0.5 * (lat0 + lat1))), 0.05)
-    extent_km = max(lat1 - lat0, (lon1 - lon0) * coslat) * KM_PER_DEG
-    margin = max(margin_km, 0.5 * extent_km) / KM_PER_DEG  # degrees of latitude
-    blon = _unwrap_lon(beacons.lon, 0.5 * (lon0 + lon1))
-    inside = (beacons.lat >= lat0 - margin) & (beacons.lat <= lat1 + margin)
-    return inside & (blon >= lon0 - margin / coslat) & (blon <= lon1 + margin / coslat)
+MARGIN_FRACTION = 0.15  # of the larger extent, on every side
+MIN_MARGIN_KM = 10.0
+MIN_HALF_KM = 25.0  # a frame at least 50 km across
+MAX_FRAME_RATIO = 2.0  # width / height (km) kept within [1/2, 2]
+MIN_ELLIPSE_PX = 12.0  # the median 95% ellipse is drawn at least this wide, enlarged if need be
+ENLARGEMENTS = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000)
+ELLIPSE_STYLE = {"face_alpha": 0.25, "edge_alpha": 0.9, "lw": 0.8}
+LABEL_ZORDER = 10  # beacon labels above every data artist
+
+
+def frame_of(lat: NDArray, lon: NDArray) -> tuple[float, float, float, float]:
+    """(lat_min, lat_max, lon_min, lon_max) around the finite points: their extent plus
+    `MARGIN_FRACTION` of the larger extent (at least `MIN_MARGIN_KM`) on every side, at least
+    2 x `MIN_HALF_KM` across, the shorter side widened to keep width/height within `MAX_FRAME_RATIO`."""
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    lat, lon = np.asarray(lat)[ok], np.asarray(lon)[ok]
+    lat_c, lon_c = 0.5 * (lat.min() + lat.max()), 0.5 * (lon.min() + lon.max())
+    coslat = max(np.cos(np.radians(lat_c)), 0.05)
+    half_x = 0.5 * (lon.max() - lon.min()) * KM_PER_DEG * coslat
+    half_y = 0.5 * (lat.max() - lat.min()) * KM_PER_DEG
+    margin = max(MARGIN_FRACTION * 2 * max(half_x, half_y), MIN_MARGIN_KM)
+    half_x, half_y = max(half_x + margin, MIN_HALF_KM), max(half_y + margin, MIN_HALF_KM)
+    half_x, half_y = max(half_x, half_y / MAX_FRAME_RATIO), max(half_y, half_x / MAX_FRAME_RATIO)
+    dlat, dlon = half_y / KM_PER_DEG, half_x / (KM_PER_DEG * coslat)
+    return float(lat_c - dlat), float(lat_c + dlat), float(lon_c - dlon), float(lon_c + dlon)
 
 
 def _sd_step_days(span_days: float) -> float:
-    """A round spacing (days) giving about SD_CIRCLES uncertainty circles along the track."""
+    """A round spacing (days) giving about SD_CIRCLES uncertainty ellipses along the track."""
     for step in (1, 2, 5, 10, 15, 30, 60, 90, 180, 365):
         if span_days / step <= SD_CIRCLES:
             return float(step)
@@ -75,9 +105,18 @@ def _ellipse_polygon(lat: float, lon: float, smaj_km: float, smin_km: float, ang
     return np.column_stack([lon + pts[:, 0] / (KM_PER_DEG * coslat), lat + pts[:, 1] / KM_PER_DEG])
 
 
-def _draw_ellipses(ax: Axes, track: pd.DataFrame, times: NDArray, lat: NDArray, lon: NDArray, colors: NDArray):
-    """Draw the 95% ellipse every few days (a circle of radius 2 sd_km when the track has no
-    ellipse columns); return the spacing in days (None if none drawn)."""
+def enlargement(major_95_km: NDArray, frame_width_km: float, width_px: float) -> int:
+    """The smallest round factor (`ENLARGEMENTS`) drawing the median 95% ellipse at least
+    `MIN_ELLIPSE_PX` wide on an axes `width_px` wide showing `frame_width_km`."""
+    median_px = 2.0 * float(np.nanmedian(major_95_km)) * width_px / frame_width_km
+    return next((f for f in ENLARGEMENTS if median_px * f >= MIN_ELLIPSE_PX), ENLARGEMENTS[-1])
+
+
+def _draw_ellipses(ax: Axes, track: pd.DataFrame, times: NDArray, lat: NDArray, lon: NDArray, colors: NDArray,
+                   frame_width_km: float) -> tuple[float, int] | None:  # fmt: skip
+    """Draw the 95% ellipse every few days (a circle of radius 2.45 x sd_km/sqrt(2) when the
+    track has no ellipse columns), enlarged by a round factor when too small to see; return
+    (spacing in days, factor), or None if none was drawn."""
     sd = _column(track, "sd_km")
     if "smaj_km" in track:
         axes = np.column_stack([_column(track, "smaj_km"), _column(track, "smin_km"), _column(track, "angle_deg")])
@@ -86,14 +125,25 @@ def _draw_ellipses(ax: Axes, track: pd.DataFrame, times: NDArray, lat: NDArray, 
     if len(times) == 0 or not np.isfinite(axes[:, 0]).any():
         return None
     step = _sd_step_days((times[-1] - times[0]) / np.timedelta64(1, "D"))
-    drawn = False
-    for k in _sd_indices(times, step):
-        if not (np.all(np.isfinite(axes[k])) and np.isfinite(lat[k]) and np.isfinite(lon[k])):
-            continue
-        vertices = _ellipse_polygon(lat[k], lon[k], *axes[k])
-        ax.add_patch(Polygon(vertices, fc=(*colors[k][:3], 0.25), ec=(0.0, 0.0, 0.0, 0.7), lw=0.7, zorder=3.5))
-        drawn = True
-    return step if drawn else None
+    chosen = [k for k in _sd_indices(times, step) if np.all(np.isfinite(axes[k])) and np.isfinite(lat[k] + lon[k])]
+    if not chosen:
+        return None
+    width_px = FIGSIZE[0] * DPI * 0.7  # the map's share of the figure, roughly
+    factor = enlargement(ELLIPSE_95_SCALE * axes[chosen, 0], frame_width_km, width_px)
+    for k in chosen:
+        vertices = _ellipse_polygon(lat[k], lon[k], factor * axes[k, 0], factor * axes[k, 1], axes[k, 2])
+        ax.add_patch(Polygon(vertices, **_ellipse_colors(colors[k]), zorder=3.5))
+    return step, factor
+
+
+def _ellipse_colors(color: Any) -> dict[str, Any]:
+    """Face and edge colours (and line width) of an ellipse, and of its legend patch."""
+    rgb = tuple(color[:3])
+    return {
+        "fc": (*rgb, ELLIPSE_STYLE["face_alpha"]),
+        "ec": (*rgb, ELLIPSE_STYLE["edge_alpha"]),
+        "lw": ELLIPSE_STYLE["lw"],
+    }
 
 
 def _draw_modes(ax: Axes, track: pd.DataFrame, modes: pd.DataFrame | None, ref_lon: float) -> bool:
@@ -113,23 +163,38 @@ def _draw_modes(ax: Axes, track: pd.DataFrame, modes: pd.DataFrame | None, ref_l
     return True
 
 
-def _draw_beacons(ax: Axes, beacons: BeaconTable, keep: NDArray[np.bool_], ref_lon: float) -> None:
-    """Beacons as black triangles labelled with their ids."""
-    if not keep.any():
-        return
-    lon = _unwrap_lon(beacons.lon[keep], ref_lon)
-    lat = beacons.lat[keep]
-    ax.scatter(lon, lat, marker="^", s=70, c="k", edgecolors="w", linewidths=0.8, zorder=5, label="beacon")
-    for b, x, y in zip(beacons.beacon_id[keep], lon, lat, strict=True):
+def _edge_point(lat: float, lon: float, frame: tuple[float, float, float, float]) -> tuple[float, float]:
+    """Where the line from the frame's centre towards (lat, lon) leaves the frame."""
+    lat0, lat1, lon0, lon1 = frame
+    cy, cx = 0.5 * (lat0 + lat1), 0.5 * (lon0 + lon1)
+    dy, dx = lat - cy, lon - cx
+    scale = min((0.5 * (lat1 - lat0)) / abs(dy) if dy else np.inf, (0.5 * (lon1 - lon0)) / abs(dx) if dx else np.inf)
+    return cy + 0.97 * scale * dy, cx + 0.97 * scale * dx
+
+
+def _draw_beacons(ax: Axes, beacons: BeaconTable, ref_lon: float, frame: tuple[float, float, float, float]) -> int:
+    """Beacons in the frame as black triangles, those outside as hollow ones on the frame's
+    edge towards them; every one labelled above the data. Returns how many are outside."""
+    lat0, lat1, lon0, lon1 = frame
+    lon = _unwrap_lon(beacons.lon, 0.5 * (lon0 + lon1))
+    inside = (beacons.lat >= lat0) & (beacons.lat <= lat1) & (lon >= lon0) & (lon <= lon1)
+    if inside.any():
+        ax.scatter(lon[inside], beacons.lat[inside], marker="^", s=70, c="k", edgecolors="w", linewidths=0.8,
+                   zorder=5, label="beacon")  # fmt: skip
+    edge = [_edge_point(beacons.lat[i], lon[i], frame) for i in np.flatnonzero(~inside)]
+    if edge:
+        ey, ex = np.array(edge).T
+        ax.scatter(ex, ey, marker="^", s=50, facecolors="w", edgecolors="k", linewidths=0.9, zorder=5,
+                   label="beacon outside the frame (on its edge, towards it)")  # fmt: skip
+    points = [(b, x, y) for b, x, y in zip(beacons.beacon_id[inside], lon[inside], beacons.lat[inside], strict=True)]
+    points += [(b, x, y) for b, (y, x) in zip(beacons.beacon_id[~inside], edge, strict=True)]
+    for b, x, y in points:
         ax.annotate(
-            str(b),
-            (x, y),
-            xytext=(5, 5),
-            textcoords="offset points",
-            fontsize=8,
-            zorder=6,
-            bbox={"boxstyle": "round,pad=0.15", "fc": "w", "ec": "none", "alpha": 0.7},
-        )
+            str(b), (x, y), xytext=(0, 7), textcoords="offset points", ha="center", va="bottom", fontsize=8,
+            zorder=LABEL_ZORDER, annotation_clip=True,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "w", "ec": "none", "alpha": 0.8},
+        )  # fmt: skip
+    return int((~inside).sum())
 
 
 def _draw_fixes(ax: Axes, info: FloatInfo, ref_lon: float) -> None:
@@ -142,10 +207,38 @@ def _draw_fixes(ax: Axes, info: FloatInfo, ref_lon: float) -> None:
         ax.plot(_unwrap_lon(lon, ref_lon), lat, marker, ms=size, mfc=color, mec="k", zorder=7, label=label)
 
 
+def scale_bar_km(frame_width_km: float) -> float:
+    """A round length (1, 2 or 5 x 10^k km) near a fifth of the frame's width."""
+    target = frame_width_km / 5.0
+    exponent = np.floor(np.log10(target))
+    return float(max((m * 10**exponent for m in (1, 2, 5) if m * 10**exponent <= target), default=10**exponent))
+
+
+def _draw_scale_bar(ax: Axes, frame: tuple[float, float, float, float]) -> None:
+    """A bar of round length in km at the lower left of the frame, labelled above it."""
+    lat0, lat1, lon0, lon1 = frame
+    y = lat0 + 0.06 * (lat1 - lat0)
+    coslat = max(np.cos(np.radians(y)), 0.05)
+    km = scale_bar_km((lon1 - lon0) * KM_PER_DEG * coslat)
+    x0 = lon0 + 0.05 * (lon1 - lon0)
+    x1 = x0 + km / (KM_PER_DEG * coslat)
+    halo = [patheffects.withStroke(linewidth=4, foreground="w")]
+    ax.plot([x0, x1], [y, y], "-", color="k", lw=2.0, solid_capstyle="butt", zorder=8, gid="scalebar",
+            path_effects=halo)  # fmt: skip
+    ax.annotate(f"{km:g} km", (0.5 * (x0 + x1), y), xytext=(0, 4), textcoords="offset points", ha="center",
+                va="bottom", fontsize=8, zorder=8, gid="scalebar", path_effects=halo)  # fmt: skip
+
+
 def _time_norm(tnum: NDArray) -> Normalize:
     """Colour normalisation over the track's dates (a one-day span for a single time)."""
     lo, hi = float(tnum.min()), float(tnum.max())
     return Normalize(lo, hi) if hi > lo else Normalize(lo - 0.5, hi + 0.5)
+
+
+def map_title(float_id: str) -> str:
+    """'float767: estimated track' (an id already saying 'float' is not repeated), else
+    'Float F01: estimated track'."""
+    return f"{float_name(float_id)}: estimated track"
 
 
 def plot_track(
@@ -155,59 +248,88 @@ def plot_track(
     path: Path,
     truth: pd.DataFrame | None = None,
     modes: pd.DataFrame | None = None,
+    background: Background | None = None,
 ) -> Path:
+    """`draw_track` into a new figure, written as a PNG to `path`."""
+    with figure() as fig:
+        draw_track(fig, track, beacons, info, truth, modes, background)
+        return save_png(fig, path)
+
+
+def draw_track(
+    fig: Figure,
+    track: pd.DataFrame,
+    beacons: BeaconTable,
+    info: FloatInfo,
+    truth: pd.DataFrame | None = None,
+    modes: pd.DataFrame | None = None,
+    background: Background | None = None,
+) -> Figure:
     """Map of the estimated track coloured by time, with 95% ellipses, ambiguous positions and
-    their second modes, beacons, fixes and optional truth."""
+    their second modes, beacons, fixes, a scale bar and optional truth; `background` draws
+    map context under it (module docstring)."""
     times = _times(track)
     lat, lon_raw = _column(track, "lat"), _column(track, "lon")
     ref_lon = _reference_lon(lon_raw, info.launch_lon)
     lon = _unwrap_lon(lon_raw, ref_lon)
-    mean_lat = float(np.nanmean(lat)) if np.isfinite(lat).any() else info.launch_lat
-    with figure() as fig:
-        ax = fig.add_subplot()
-        handles: list[object] = []
-        if len(times):
-            tnum = mdates.date2num(times)
-            norm = _time_norm(tnum)
-            cmap = matplotlib.colormaps[TIME_CMAP]
-            colors = cmap(norm(tnum))
-            ax.plot(lon, lat, "-", color="0.55", lw=0.8, zorder=2)
-            ax.scatter(lon, lat, c=colors, s=10, zorder=3, label="estimated track")
-            step = _draw_ellipses(ax, track, times, lat, lon, colors)
-            if step is not None:
-                handles.append(
-                    Patch(fc=(*cmap(0.5)[:3], 0.25), ec="k", lw=0.7, label=f"95% ellipse (every {step:g} d)")
-                )
-            _draw_modes(ax, track, modes, ref_lon)
-            if float(norm.vmax or 0.0) - float(norm.vmin or 0.0) > 1.0:  # a colour scale means nothing for one window
-                cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
-                date_axis(cbar.ax.yaxis)
-        else:
-            _note(ax, "no track estimate")
-        if truth is not None and len(truth):
-            tlon = _unwrap_lon(_column(truth, "lon"), ref_lon)
-            ax.plot(tlon, _column(truth, "lat"), "--", color="k", lw=1.2, zorder=4, label="truth")
-        keep = _select_beacons(beacons, np.append(lat, info.launch_lat), np.append(lon, info.launch_lon))
-        _draw_beacons(ax, beacons, keep, ref_lon)
-        _draw_fixes(ax, info, ref_lon)
-        ax.set_aspect(1.0 / max(np.cos(np.radians(mean_lat)), 0.05), adjustable="datalim")
-        ax.set_xlabel("longitude (°E)")
-        ax.set_ylabel("latitude (°N)")
-        ax.grid(True, lw=0.4, alpha=0.5)
-        legend_handles, _ = ax.get_legend_handles_labels()
-        hidden = int((~keep).sum())
-        if hidden:
-            handles.append(Line2D([], [], ls="none", label=f"{hidden} distant beacon(s) not shown"))
-        all_handles = legend_handles + handles
-        fig.legend(
-            handles=all_handles,
-            loc="outside lower center",
-            fontsize=8,
-            frameon=False,
-            ncols=min(len(all_handles), 4),
-        )
-        ax.set_title(f"Float {info.float_id}: estimated track" + _span_text(times))
-        return save_png(fig, path)
+    pts_lat: list[NDArray] = [lat, np.array([info.launch_lat])]
+    pts_lon: list[NDArray] = [lon, _unwrap_lon(np.array([info.launch_lon]), ref_lon)]
+    if info.has_end_fix:
+        pts_lat.append(np.array([info.end_lat]))
+        pts_lon.append(_unwrap_lon(np.array([info.end_lon]), ref_lon))
+    if truth is not None and len(truth):
+        pts_lat.append(_column(truth, "lat"))
+        pts_lon.append(_unwrap_lon(_column(truth, "lon"), ref_lon))
+    frame = frame_of(np.concatenate(pts_lat), np.concatenate(pts_lon))
+    lat0, lat1, lon0, lon1 = frame
+    coslat = max(np.cos(np.radians(0.5 * (lat0 + lat1))), 0.05)
+    frame_width_km = (lon1 - lon0) * KM_PER_DEG * coslat
+    ax = fig.add_subplot()
+    ax.set_xlim(lon0, lon1)
+    ax.set_ylim(lat0, lat1)
+    ax.set_aspect(1.0 / coslat, adjustable="box")
+    if background is not None:  # the one seam for map context (coastline, depth)
+        background(ax, lat0, lat1, lon0, lon1)
+        ax.set_xlim(lon0, lon1)
+        ax.set_ylim(lat0, lat1)
+    handles: list[object] = []
+    if len(times):
+        tnum = mdates.date2num(times)
+        norm = _time_norm(tnum)
+        cmap = matplotlib.colormaps[TIME_CMAP]
+        colors = cmap(norm(tnum))
+        ax.plot(lon, lat, "-", color="0.55", lw=0.8, zorder=2)
+        ax.scatter(lon, lat, c=colors, s=10, zorder=3, label="estimated track")
+        drawn = _draw_ellipses(ax, track, times, lat, lon, colors, frame_width_km)
+        if drawn is not None:
+            step, factor = drawn
+            size = "" if factor == 1 else f", drawn ×{factor} enlarged"
+            handles.append(Patch(**_ellipse_colors(cmap(0.5)), label=f"95% ellipse (every {step:g} d{size})"))
+        _draw_modes(ax, track, modes, ref_lon)
+        if float(norm.vmax or 0.0) - float(norm.vmin or 0.0) > 1.0:  # a colour scale means nothing for one window
+            cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
+            date_ticks(cbar.ax.yaxis, times.min(), times.max())
+    else:
+        _note(ax, "no track estimate")
+    if truth is not None and len(truth):
+        tlon = _unwrap_lon(_column(truth, "lon"), ref_lon)
+        ax.plot(tlon, _column(truth, "lat"), "--", color="k", lw=1.2, zorder=4, label="truth")
+    _draw_beacons(ax, beacons, ref_lon, frame)
+    _draw_fixes(ax, info, ref_lon)
+    _draw_scale_bar(ax, frame)
+    ax.set_xlim(lon0, lon1)
+    ax.set_ylim(lat0, lat1)
+    ax.xaxis.set_major_formatter(FuncFormatter(lon_text))
+    ax.yaxis.set_major_formatter(FuncFormatter(lat_text))
+    ax.set_xlabel("longitude")
+    ax.set_ylabel("latitude")
+    ax.grid(True, lw=0.4, alpha=0.5)
+    legend_handles, _ = ax.get_legend_handles_labels()
+    all_handles = legend_handles + handles
+    fig.legend(handles=all_handles, loc="outside lower center", fontsize=8, frameon=False,
+               ncols=min(len(all_handles), 4))  # fmt: skip
+    ax.set_title(map_title(info.float_id) + _span_text(times))
+    return fig
 
 
 def _span_text(times: NDArray[np.datetime64]) -> str:

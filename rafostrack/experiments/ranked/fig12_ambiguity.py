@@ -49,7 +49,7 @@ class Sizes:
 
 
 FULL = Sizes(seeds=5, particles=1000)
-QUICK = Sizes(seeds=2, particles=300)
+QUICK = Sizes(seeds=2, particles=1000, days=150)  # CI: fewer seeds, the first 150 days, the full method
 SEED = 0  # the default seed of the published run
 
 

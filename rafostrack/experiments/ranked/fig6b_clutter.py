@@ -46,7 +46,9 @@ class Sizes:
 
 
 FULL = Sizes(repeats=24, particles=1000)
-QUICK = Sizes(repeats=3, particles=300)
+# Quick (CI): fewer repeats and clutter levels, never a smaller run: every quick run is one of
+# the full runs (same particles, days and seeds), so quick numbers are a subset of the full ones.
+QUICK = Sizes(repeats=2, particles=1000, lambdas=(2.0, 8.0))
 SEED = 100  # the default seed of the published run
 
 

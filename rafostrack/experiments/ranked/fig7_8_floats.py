@@ -42,7 +42,7 @@ class Sizes:
 
 
 FULL = Sizes(particles=1000)
-QUICK = Sizes(particles=300)
+QUICK = Sizes(particles=1000, days=120)  # CI: the full method on the first 120 days of each float
 SEED = 0  # the default seed of the published run
 
 
