@@ -87,12 +87,11 @@ class DiscreteBayesNet:
         if len(set(keep)) != len(keep):
             raise ValueError(f"variables repeated in {list(keep)}")
         letter = {name: _LETTERS[i] for i, name in enumerate(self.nodes)}
-        operands: list[object] = []
-        for node in self.nodes.values():
-            operands += [node.cpt, [letter[p] for p in node.parents] + [letter[node.name]]]
-        subscripts = ",".join("".join(s) for s in operands[1::2])  # type: ignore[arg-type]
-        output = "".join(letter[k] for k in keep)
-        return np.einsum(f"{subscripts}->{output}", *operands[0::2], optimize="greedy")
+        tables = [node.cpt for node in self.nodes.values()]
+        subscripts = ["".join(letter[v] for v in (*node.parents, node.name)) for node in self.nodes.values()]
+        spec = ",".join(subscripts) + "->" + "".join(letter[k] for k in keep)
+        out: NDArray[np.float64] = np.einsum(spec, *tables, optimize="greedy")
+        return out
 
     def posterior_table(self, query: str, given: Sequence[str]) -> NDArray[np.float64]:
         """P(query | given) for every combination of the given variables' states: an array

@@ -173,4 +173,6 @@ class ContextGrid:
     def cell_centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """x of the columns' centres and y of the rows' centres."""
         ny, nx = self.shape
-        return self.x0 + (np.arange(nx) + 0.5) * self.dx, self.y0 + (np.arange(ny) + 0.5) * self.dy
+        x = self.x0 + (np.arange(nx, dtype=float) + 0.5) * self.dx
+        y = self.y0 + (np.arange(ny, dtype=float) + 0.5) * self.dy
+        return x, y

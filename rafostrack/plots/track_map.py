@@ -32,6 +32,7 @@ from .base import (
     figure,
     save_png,
 )
+from .context_layer import draw_context, float_context
 
 
 def _select_beacons(beacons: BeaconTable, lat: NDArray, lon: NDArray, margin_km: float = 600.0) -> NDArray[np.bool_]:
@@ -190,6 +191,7 @@ def plot_track(
         keep = _select_beacons(beacons, np.append(lat, info.launch_lat), np.append(lon, info.launch_lon))
         _draw_beacons(ax, beacons, keep, ref_lon)
         _draw_fixes(ax, info, ref_lon)
+        draw_context(ax, *ax.get_ylim(), *ax.get_xlim(), context=float_context(info.float_id))
         ax.set_aspect(1.0 / max(np.cos(np.radians(mean_lat)), 0.05), adjustable="datalim")
         ax.set_xlabel("longitude (°E)")
         ax.set_ylabel("latitude (°N)")

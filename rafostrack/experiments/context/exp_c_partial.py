@@ -25,5 +25,5 @@ def run(outdir: Path, sz: Sizes, *, seed: int = 0, workers: int = 2) -> dict[str
     title = "Experiment C (paper Figs. 6-7): three range-limited sensors, context at cell entry vs no context"
     return run_comparison(
         "exp_c_partial", title, outdir, sz, ("none", "entry"), PARTIAL_SENSORS, seed=seed, workers=workers,
-        claim=CLAIM,
+        claim=CLAIM, snapshots=True,
     )  # fmt: skip

@@ -41,16 +41,16 @@ FULL = Sizes(repeats=30, particles=1000)
 QUICK = Sizes(repeats=4, particles=300)
 
 
-def _one_repeat(task: tuple[int, int, tuple[str, ...], tuple[Sensor, ...], int]) -> dict[str, Any]:
+def _one_repeat(task: tuple[int, int, tuple[str, ...], tuple[Sensor, ...], int, bool]) -> dict[str, Any]:
     """One repetition: measurements, then each rule's filter (same seed for all)."""
-    seed, rep, rules, sensors, particles = task
+    seed, rep, rules, sensors, particles, snapshots = task
     grid, truth, fs = context_grid(), truth_track(), FilterSettings()
     meas = simulate_measurements(truth, sensors, EVERY, SIGMA, np.random.default_rng([seed, rep, 0]))
     out: dict[str, Any] = {"measurements": np.array([[m.step, *m.z] for m in meas]).reshape(-1, 3)}
     for rule in rules:
         pf = PlanarFilter(None if rule == "none" else grid, rule, particles, SIGMA, fs.accel_sd)
         rng = np.random.default_rng([seed, rep, 1])
-        snap = (1000, 2000) if rep == 0 else ()
+        snap = (1000, 2000) if rep == 0 and snapshots else ()
         run = pf.run(N_STEPS, meas, START, fs.prior_sd, fs.speed_sd, rng, truth=truth, snapshot_steps=snap)
         out[rule] = run
     return out
@@ -58,19 +58,22 @@ def _one_repeat(task: tuple[int, int, tuple[str, ...], tuple[Sensor, ...], int])
 
 def run_comparison(
     name: str, title: str, outdir: Path, sz: Sizes, rules: tuple[str, ...], sensors: tuple[Sensor, ...], *,
-    seed: int, workers: int, claim: str,
+    seed: int, workers: int, claim: str, snapshots: bool = False,
 ) -> dict[str, Any]:  # fmt: skip
     """Run `sz.repeats` repetitions, write `<name>.png` (tracks and RMSE curves) and the CSVs,
     and return the summary with the table."""
-    tasks = [(seed, rep, rules, sensors, sz.particles) for rep in range(sz.repeats)]
+    tasks = [(seed, rep, rules, sensors, sz.particles, snapshots) for rep in range(sz.repeats)]
     reps = pmap(_one_repeat, tasks, workers)
     truth = truth_track()
     steps = np.arange(N_STEPS + 1)
     rmse = {r: np.array([rep[r].rmse for rep in reps]) for r in rules}  # (repeats, steps)
     err = {r: np.array([np.hypot(*(rep[r].estimate - truth).T) for rep in reps]) for r in rules}
+    seen = np.array([any(s.sees(p) for s in sensors) for p in truth])
     table = {}
     for r in rules:
         table[r] = {
+            "rmse_seen": mean_se(rmse[r][:, seen].mean(axis=1)),
+            "rmse_unseen": mean_se(rmse[r][:, ~seen].mean(axis=1)) if (~seen).any() else None,
             "rmse_mean": mean_se(rmse[r].mean(axis=1)),
             "rmse_steps_0_700": mean_se(rmse[r][:, : MARSH_STEPS + 1].mean(axis=1)),
             "rmse_after_700": mean_se(rmse[r][:, MARSH_STEPS + 1 :].mean(axis=1)),
@@ -98,7 +101,7 @@ def run_comparison(
     save_csv(curves, outdir / files[1])
     save_csv(track, outdir / files[2])
     _draw(outdir / files[0], title, rules, sensors, first, truth, curves, rmse)
-    if first.get("entry") is not None and first["entry"].snapshots:
+    if snapshots:
         files.append(f"{name}_particles.png")
         _draw_particles(outdir / files[-1], rules, sensors, first, truth)
     return {
@@ -110,6 +113,7 @@ def run_comparison(
         "repeats": sz.repeats,
         "particles": sz.particles,
         "steps": N_STEPS,
+        "unseen_steps": int((~seen).sum()),
         "every": EVERY,
         "sigma": SIGMA,
         "rules": list(rules),
