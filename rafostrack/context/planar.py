@@ -1,9 +1,9 @@
 """A plain particle filter on a plane, for the paper's synthetic experiments (section III).
 
 State per particle: position (x, y) and velocity (vx, vy), in map units and units per time
-step. Motion: nearly constant velocity, x_t = x_t-1 + v_t-1 + a / 2, v_t = v_t-1 + a with a
-white acceleration a ~ N(0, accel_sd^2 I) per step (a target's sharp turns are what this
-model does not capture). Observations: position measurements z = x + N(0, sigma^2 I) from
+step. Motion `ncv` (nearly constant velocity): x_t = x_t-1 + v_t-1 + a / 2, v_t = v_t-1 + a
+with a white acceleration a ~ N(0, process_sd^2 I) per step (a target's sharp turns are what
+this model does not capture); or `rw` (random walk): x_t = x_t-1 + N(0, process_sd^2 I). Observations: position measurements z = x + N(0, sigma^2 I) from
 sensors, each seeing the target only within its range. The filter is sequential importance
 resampling with the bootstrap proposal: weights w_t = w_t-1 p(z_t | x_t) (the product over
 the measurements at step t), systematic resampling (`rafostrack.resampling`) when the
@@ -89,10 +89,13 @@ class PlanarFilter:
     rule: str
     particles: int
     sigma: float
-    accel_sd: float
+    process_sd: float
     ess_fraction: float = 0.5
+    motion: str = "ncv"
 
     def __post_init__(self) -> None:
+        if self.motion not in ("ncv", "rw"):
+            raise ValueError(f"motion must be ncv or rw, got {self.motion!r}")
         if self.rule not in RULES:
             raise ValueError(f"rule must be one of {', '.join(RULES)}, got {self.rule!r}")
         if self.rule != "none" and self.grid is None:
@@ -120,10 +123,12 @@ class PlanarFilter:
         out = PlanarRun(n_steps)
         for t in range(n_steps + 1):
             before = xy
-            if t > 0:
-                accel = self.accel_sd * rng.standard_normal((n, 2))
+            if t > 0 and self.motion == "ncv":
+                accel = self.process_sd * rng.standard_normal((n, 2))
                 xy = xy + v + 0.5 * accel
                 v = v + accel
+            elif t > 0:
+                xy = xy + self.process_sd * rng.standard_normal((n, 2))
             observed = by_step.get(t, [])
             for m in observed:
                 log_w = log_w - 0.5 * ((xy - m.z) ** 2).sum(axis=1) / self.sigma**2
