@@ -98,7 +98,7 @@ def test_descending_latitude_and_0_360_longitudes(tmp_path, grid_values):
 def test_a_region_across_the_grids_seam_is_read_in_two_pieces(tmp_path):
     lon = np.arange(0.0, 360.0, 1.0)  # a global 0..360 grid; the region straddles 0 E
     lat = np.arange(-10.0, 10.1, 1.0)
-    lon2, lat2 = np.meshgrid(lon, lat)
+    lon2, _lat2 = np.meshgrid(lon, lat)
     east = np.where(lon2 > 180, lon2 - 360, lon2)
     path = _write(tmp_path / "global.nc", -(4000.0 + 10.0 * east), lat=lat, lon=lon)
     out = read_bathymetry(path, Region(-5.0, 5.0, -20.0, 20.0), 1.0, is_water=_water)

@@ -37,7 +37,7 @@ def _brute_force(net: DiscreteBayesNet, query: str, evidence: dict[str, int]) ->
             continue
         p = 1.0
         for node in net.nodes.values():
-            p *= node.cpt[tuple(v[q] for q in node.parents) + (v[node.name],)]
+            p *= node.cpt[(*tuple(v[q] for q in node.parents), v[node.name])]
         out[v[query]] += p
     return out / out.sum()
 

@@ -11,7 +11,7 @@ from rafostrack.experiments.context.setting import context_grid, context_network
 
 def test_cells_and_outside():
     grid = ContextGrid(10.0, -5.0, 2.0, 1.0, np.array([[1.0, 0.5, 0.0]]), outside_cf=0.25)
-    row, col, inside = grid.cell_of([10.0, 13.9, 15.99, 16.0, 9.99], [-5.0, -4.5, -4.01, -4.5, -4.5])
+    _row, col, inside = grid.cell_of([10.0, 13.9, 15.99, 16.0, 9.99], [-5.0, -4.5, -4.01, -4.5, -4.5])
     assert inside.tolist() == [True, True, True, False, False]
     assert col[:3].tolist() == [0, 1, 2]
     assert grid.cf_at([11.0, 13.0, 15.0, 20.0], [-4.5] * 4).tolist() == [1.0, 0.5, 0.0, 0.25]

@@ -3,9 +3,10 @@
 State per particle: position (x, y) and velocity (vx, vy), in map units and units per time
 step. Motion `ncv` (nearly constant velocity): x_t = x_t-1 + v_t-1 + a / 2, v_t = v_t-1 + a
 with a white acceleration a ~ N(0, process_sd^2 I) per step (a target's sharp turns are what
-this model does not capture); or `rw` (random walk): x_t = x_t-1 + N(0, process_sd^2 I). Observations: position measurements z = x + N(0, sigma^2 I) from
-sensors, each seeing the target only within its range. The filter is sequential importance
-resampling with the bootstrap proposal: weights w_t = w_t-1 p(z_t | x_t) (the product over
+this model does not capture); or `rw` (random walk): x_t = x_t-1 + N(0, process_sd^2 I).
+Observations: position measurements z = x + N(0, sigma^2 I) from sensors, each seeing the
+target only within its range. The filter is sequential importance resampling with the
+bootstrap proposal: weights w_t = w_t-1 p(z_t | x_t) (the product over
 the measurements at step t), systematic resampling (`rafostrack.resampling`) when the
 effective sample size falls below `ess_fraction` N. Context (`rafostrack.context.rules`):
     none:   no CF;
