@@ -112,12 +112,6 @@ class DiscreteBayesNet:
         return out
 
 
-def deterministic_cpt(values: NDArray[np.intp], n_states: int) -> NDArray[np.float64]:
-    """A CPT putting probability 1 on state `values[parents...]`: shape (*values.shape, n)."""
-    values = np.asarray(values, dtype=np.intp)
-    return (values[..., None] == np.arange(n_states)).astype(float)
-
-
 def binary_cpt(p_true: NDArray[np.float64] | float) -> NDArray[np.float64]:
     """A CPT of a binary node (states false, true) from P(true | parents)."""
     p = np.asarray(p_true, dtype=float)

@@ -140,14 +140,6 @@ class ContextGrid:
         self.cf[r, c] = self.model.cf({k: v[r, c] for k, v in self.evidence.items()})
         self.area = label_areas(self.cf, self.band_edges)
 
-    def set_cf(self, cf: NDArray[np.float64]) -> None:
-        """Replace every CF (context computed elsewhere) and relabel the areas."""
-        cf = np.asarray(cf, dtype=float)
-        if cf.shape != self.cf.shape:
-            raise ValueError(f"cf shape {cf.shape}, expected {self.cf.shape}")
-        self.cf = cf
-        self.area = label_areas(self.cf, self.band_edges)
-
     def cell_of(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
         """Row, column and whether each point is inside the grid (row, column 0 outside)."""
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
@@ -169,10 +161,3 @@ class ContextGrid:
         """Area labels of the points (`OUTSIDE` outside the grid)."""
         row, col, inside = self.cell_of(x, y)
         return np.where(inside, self.area[row, col], OUTSIDE)
-
-    def cell_centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """x of the columns' centres and y of the rows' centres."""
-        ny, nx = self.shape
-        x = self.x0 + (np.arange(nx, dtype=float) + 0.5) * self.dx
-        y = self.y0 + (np.arange(ny, dtype=float) + 0.5) * self.dy
-        return x, y
