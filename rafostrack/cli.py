@@ -142,6 +142,7 @@ CONFIG_FLAGS: dict[str, tuple[str, str]] = {
     "clutter_rate": ("model", "clutter_rate"),
     "p_detect": ("model", "p_detect"),
     "toa_sigma_s": ("model", "toa_sigma_s"),
+    "bathymetry": ("context", "bathymetry"),
 }
 
 
@@ -198,7 +199,9 @@ def main(debug: bool) -> None:
 @click.option("--floats", type=click.Path(path_type=Path), help="Float table (default: floats.csv beside FLOAT_FILE).")
 @click.option("--launch", callback=_parse_launch, metavar="LAT,LON", help="Override the launch position.")
 @click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
-@config_options("likelihood", "engine", "motion", "particles", "seed", "clutter_rate", "p_detect", "toa_sigma_s")
+@config_options(
+    "likelihood", "engine", "motion", "particles", "seed", "clutter_rate", "p_detect", "toa_sigma_s", "bathymetry"
+)
 @click.option("--method", hidden=True, help="Removed: see --likelihood and --engine.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"), show_default=True)
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
@@ -311,7 +314,7 @@ def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> N
 @click.option("--force", is_flag=True, help="Reprocess every float, even unchanged ones.")
 @click.option("--scheduler", metavar="ADDRESS", help="Run on this Dask scheduler (tcp://host:8786) instead.")
 @click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
-@config_options("likelihood", "engine", "motion")
+@config_options("likelihood", "engine", "motion", "bathymetry")
 @click.option("--method", hidden=True, help="Removed: see --likelihood and --engine.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
 @debug_option

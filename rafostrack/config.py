@@ -172,6 +172,24 @@ class QualityConfig:
 
 
 @dataclass(frozen=True)
+class ContextConfig:
+    """Context constraints on the float's moves (`rafostrack.context`): land, the sea floor."""
+
+    land: bool = setting()
+    bathymetry: str = setting()
+    rule: str = setting(choices=lambda: ("entry", "naive"))
+    float_depth_m: float = setting("in [0, 11000] (0 = not set)", lambda v: 0 <= v <= 11000)
+    float_depth_sd_m: float = setting("> 0", _positive)
+    depth_sign: str = setting(choices=lambda: ("auto", "up", "down"))
+    depth_sd_m: float = setting("> 0", _positive)
+    depth_sd_fraction: float = setting("in [0, 1]", _fraction)
+    depth_horizontal_km: float = setting(">= 0", _non_negative)
+    land_mask_error: float = setting("strictly between 0 and 0.5", lambda v: 0 < v < 0.5)
+    cell_arcmin: float = setting("in [0.1, 60]", lambda v: 0.1 <= v <= 60)
+    margin_deg: float = setting("in [0, 30]", lambda v: 0 <= v <= 30)
+
+
+@dataclass(frozen=True)
 class Config:
     model: ModelConfig
     motion: MotionConfig
@@ -183,6 +201,7 @@ class Config:
     ambiguity: AmbiguityConfig
     bp: BPConfig
     quality: QualityConfig
+    context: ContextConfig
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return asdict(self)

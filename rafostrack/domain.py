@@ -76,6 +76,9 @@ class FloatInfo:
     # A smooth correction to the linear clock model (knot times, seconds), interpolated
     # linearly; estimated by calibration from the arrival times themselves.
     clock_residual: tuple[NDArray[np.datetime64], NDArray[np.float64]] | None = None
+    # The float's drifting depth (m, positive down; NaN = not given): the sea floor must be
+    # deeper (`rafostrack.context`).
+    depth_m: float = float("nan")
 
     def clock_offset_s(self, time: NDArray[np.datetime64] | np.datetime64) -> NDArray[np.float64]:
         """Float clock error (float clock minus true time): linear from launch to end, plus

@@ -82,6 +82,7 @@ FLOAT_OPTIONAL = (
     "clock_offset_end_s",
     "window_s",
     "max_signals",
+    "depth_m",
 )
 
 
@@ -106,6 +107,7 @@ def read_floats(path: Path, model: ModelConfig) -> dict[str, FloatInfo]:
     clock1 = parse_float_column(path, frame, "clock_offset_end_s")
     window = parse_float_column(path, frame, "window_s", default=model.window_s, lo=1e-9, expect="> 0")
     max_sig = parse_float_column(path, frame, "max_signals", default=model.max_signals, lo=1, hi=1e6)
+    depth = parse_float_column(path, frame, "depth_m", lo=0, hi=11000, expect="in [0, 11000] (metres)")
     for row in np.flatnonzero(max_sig != np.round(max_sig))[:1]:
         raise InputError(
             f"{path}: line {line_of(frame, row)}: field 'max_signals': expected a whole number >= 1, "
@@ -140,6 +142,7 @@ def read_floats(path: Path, model: ModelConfig) -> dict[str, FloatInfo]:
             clock_offset_end_s=float(clock0[row] if np.isnan(clock1[row]) else clock1[row]),
             window_s=float(window[row]),
             max_signals=int(max_sig[row]),
+            depth_m=float(depth[row]),
         )
     return floats
 

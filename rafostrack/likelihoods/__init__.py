@@ -15,8 +15,11 @@ from .fixes import PositionFixLikelihood, fix_loglik
 
 
 def move_factors_from_config(config: Config, beacons: BeaconTable, info: FloatInfo) -> tuple[MoveFactor, ...]:
-    """The configured factors on particle moves (none yet: context constraints plug in here)."""
-    return ()
+    """The configured factors on particle moves: the context constraints of `[context]`
+    (land, the sea floor; `rafostrack.context.floats`), none when it asks for none."""
+    from ..context.floats import context_factors  # the context package builds on this one
+
+    return context_factors(config, beacons, info)
 
 
 def arrivals_from_config(beacons: BeaconTable, info: FloatInfo, config: Config) -> ArrivalLikelihood:

@@ -4,11 +4,13 @@ The frame is fitted to the track, the launch and end fixes (and the truth, when 
 margin, not to the beacon array: beacons outside it are marked on its edge, towards where
 they are. Ticks read as degrees with hemisphere letters (105°W, 58°S). Map context
 (coastline, depth) comes through one seam: `plot_track(..., background=...)` is called once
-with the frame before anything else is drawn (`Background`).
+with the frame before anything else is drawn (`Background`); by default the coastline and,
+for a float tracked with context constraints, its depth contours (`context_layer`).
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -46,6 +48,7 @@ from .base import (
     lon_text,
     save_png,
 )
+from .context_layer import draw_context, float_context
 
 # Draws map context under the data: (axes, lat_min, lat_max, lon_min, lon_max), the frame in
 # degrees as drawn (longitudes within 180° of the track's, so they may pass ±180 at the dateline).
@@ -288,10 +291,11 @@ def draw_track(
     ax.set_xlim(lon0, lon1)
     ax.set_ylim(lat0, lat1)
     ax.set_aspect(1.0 / coslat, adjustable="box")
-    if background is not None:  # the one seam for map context (coastline, depth)
-        background(ax, lat0, lat1, lon0, lon1)
-        ax.set_xlim(lon0, lon1)
-        ax.set_ylim(lat0, lat1)
+    if background is None:  # the coastline, and the float's context grid if it has one
+        background = functools.partial(draw_context, context=float_context(info.float_id))
+    background(ax, lat0, lat1, lon0, lon1)  # the one seam for map context (coastline, depth)
+    ax.set_xlim(lon0, lon1)
+    ax.set_ylim(lat0, lat1)
     handles: list[object] = []
     if len(times):
         tnum = mdates.date2num(times)
