@@ -75,9 +75,8 @@ def log_likelihood(counts: NDArray, x: NDArray, v: NDArray, sensors: NDArray, p_
     a = approaching(x, v, sensors)  # (..., Ns, Nt)
     n_targets = a.shape[-1]
     if n_targets == 1:  # eq. 6
-        right = np.asarray(counts) == a[..., 0]
-        per_sensor: NDArray = np.where(right, np.log(p_correct), np.log1p(-p_correct))
-        return np.asarray(per_sensor.sum(axis=-1))
+        right = np.equal(counts, a[..., 0])
+        return np.asarray(np.log(np.where(right, p_correct, 1.0 - p_correct)).sum(axis=-1))
     p_one = np.where(a, p_correct, 1.0 - p_correct)
     # pmf of the count over 0..Nt, built by adding one target at a time (log space).
     log_p1, log_p0 = np.log(p_one), np.log1p(-p_one)
