@@ -29,9 +29,13 @@ of beacon i (unmatched, or matched to simulated clutter: clutter).
 
 Random draws: a Generator seeded with the window's entropy (the [filter] seed, the float
 id, the window time; `base.WindowPrediction`) and `stream`, drawn in a fixed order
-(detection uniforms, TOA normals, multipath uniforms and exponentials, each (P, S, s);
-clutter counts (P, S); clutter times (P, S, max count)): a window evaluated twice on the
-same particles gives bit-identical results.
+(detection uniforms, TOA normals, multipath uniforms and exponentials, each (S, s);
+clutter counts (S,); clutter times (S, max count)). They are common to all particles
+(common random numbers): simulation s of every particle uses the same detection draws,
+noise, delays and clutter, so that the weights of nearby particles differ by their
+predictions, not by independent Monte Carlo noise, and a particle's estimate depends only
+on its own state and the window, bit for bit, whichever other particles are evaluated
+with it (a subset re-evaluated for smoothed labels gets the same values).
 """
 
 from __future__ import annotations
@@ -66,16 +70,16 @@ def simulate_windows(
     empty slots, and their labels (beacon column 0..s-1, s for clutter, -1 for empty).
     `max_signals` None stores every received signal (the unranked baseline)."""
     n, s = mu_s.shape
-    shape = (n, n_sims, s)
+    shape = (n_sims, s)  # common random numbers: every particle's simulation s uses the same draws
     detected = rng.random(shape) < p_detect[:, None, :]
     toa = mu_s[:, None, :] + model.toa_sigma_s * rng.standard_normal(shape)
     delayed = rng.random(shape) < model.multipath_fraction
     toa = toa + np.where(delayed, model.multipath_delay_s * rng.standard_exponential(shape), 0.0)
     received = detected & (toa >= 0.0) & (toa <= window_s)
-    n_clutter = rng.poisson(model.clutter_rate, (n, n_sims))
+    n_clutter = rng.poisson(model.clutter_rate, n_sims)
     most = int(n_clutter.max()) if n_clutter.size else 0
-    clutter = rng.uniform(0.0, window_s, (n, n_sims, most))
-    clutter = np.where(np.arange(most) < n_clutter[..., None], clutter, np.inf)
+    clutter = rng.uniform(0.0, window_s, (n_sims, most))
+    clutter = np.broadcast_to(np.where(np.arange(most) < n_clutter[:, None], clutter, np.inf), (n, n_sims, most))
     times = np.concatenate([np.where(received, toa, np.inf), clutter], axis=-1)
     labels = np.concatenate([np.arange(s), np.full(most, s)]).astype(np.intp)
     width = s + most if max_signals is None else min(max_signals, s + most)
