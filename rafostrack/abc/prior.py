@@ -87,5 +87,6 @@ def distances(
     for lo in range(0, n, step):
         th = theta[lo : lo + step]
         sim = simulate_counts(prior.positions(th), th, sensors, p_correct, rng)
-        out[lo : lo + step] = ((sim - obs) ** 2).sum(axis=-1)
+        diff = sim - obs
+        out[lo : lo + step] = np.einsum("...i,...i->...", diff, diff)
     return out

@@ -66,7 +66,8 @@ def rejection_step(
     rng: np.random.Generator,
     keep: int = 0,
 ) -> StepResult:
-    """ABC-Rej (module docstring); `keep` accepted draws are returned for pictures."""
+    """ABC-Rej (module docstring); the `keep` draws nearest the data (the accepted ones
+    first) are returned for pictures."""
     theta = prior.sample(draws, 1, rng)[:, :, 0]  # (n, B, Nt, 2)
     rho = distances(theta[:, :, None], prior, counts, sensors, p_correct, rng)[:, :, 0]
     accepted = rho < tolerance
@@ -76,7 +77,7 @@ def rejection_step(
     v_hat = np.where(fallback[:, None, None], _nearest_mean(theta, rho), mean_acc)
     samples = None
     if keep:
-        order = np.argsort(~accepted, axis=0, kind="stable")[:keep]  # accepted draws first
+        order = np.argsort(rho, axis=0, kind="stable")[:keep]
         samples = np.moveaxis(np.take_along_axis(theta, order[..., None, None], axis=0), 0, 1)
     return StepResult(v_hat, n_acc / draws, fallback, samples)
 
@@ -100,7 +101,8 @@ def abc_chain_step(
     keep: int = 0,
 ) -> StepResult:
     """ABC-RW (one tolerance, no swaps) or ABC-PT (a ladder, `swaps` per iteration); see
-    the module docstring. Diagnostics are chain 1's."""
+    the module docstring. Diagnostics are chain 1's; `keep` returns its last states (the
+    nearest draws where it never entered its tolerance)."""
     eps = np.asarray(tolerances, dtype=float)
     n_chains = len(eps)
     theta = prior.sample(iterations, n_chains, rng)  # (n, B, C, Nt, 2)
@@ -142,7 +144,12 @@ def abc_chain_step(
     fallback = n_in[:, 0] == 0
     mean_in = sums[:, 0] / np.maximum(n_in[:, 0], 1)[:, None, None]
     v_hat = np.where(fallback[:, None, None], _nearest_mean(theta[:, :, 0], rho[:, :, 0]), mean_in)
-    samples = None if kept is None else np.moveaxis(kept, 0, 1)
+    samples = None
+    if kept is not None:
+        samples = np.moveaxis(kept, 0, 1)
+        for b in np.flatnonzero(fallback):  # a chain that never entered: show the nearest draws
+            nearest = np.argsort(rho[:, b, 0], kind="stable")[:keep]
+            samples[b] = theta[np.resize(nearest, keep), b, 0]
     swap_rate = swap_ok / (swaps * (iterations - 1)) if pick is not None else None
     return StepResult(v_hat, moves[:, 0] / (iterations - 1), fallback, samples, swap_rate)
 

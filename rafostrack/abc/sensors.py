@@ -50,9 +50,13 @@ def approaching(x: NDArray, v: NDArray, sensors: NDArray) -> NDArray[np.bool_]:
     """A_ij = 1{<x^j - l_i, v^j> < 0}: target j comes closer to sensor i; (..., Ns, Nt).
 
     Computed as <l_i, v^j> > <x^j, v^j> (no (..., Ns, Nt, 2) temporary)."""
+    return np.swapaxes(_approaching_by_target(x, v, sensors), -1, -2)
+
+
+def _approaching_by_target(x: NDArray, v: NDArray, sensors: NDArray) -> NDArray[np.bool_]:
+    """A_ij laid out target-major, (..., Nt, Ns): sums over targets then add contiguous rows."""
     xv = (x * v).sum(axis=-1)  # (..., Nt)
-    lv = np.swapaxes(v @ sensors.T, -1, -2)  # (..., Ns, Nt)
-    return np.asarray(lv > xv[..., None, :])
+    return np.asarray(v @ sensors.T > xv[..., None])
 
 
 def reported_counts(bits: NDArray[np.bool_], p_correct: float, rng: np.random.Generator) -> NDArray[np.int64]:
@@ -65,8 +69,13 @@ def simulate_counts(
     x: NDArray, v: NDArray, sensors: NDArray, p_correct: float, rng: np.random.Generator
 ) -> NDArray[np.int64]:
     """The model M of the paper: counts (..., Ns) that the network reports for targets at
-    (x, v), sensor errors included."""
-    return reported_counts(approaching(x, v, sensors), p_correct, rng)
+    (x, v), sensor errors included (`reported_counts` on the bits, laid out target-major)."""
+    bits = _approaching_by_target(x, v, sensors)
+    reported = bits ^ (rng.random(bits.shape, dtype=np.float32) >= np.float32(p_correct))
+    counts = reported[..., 0, :].astype(np.int64)
+    for j in range(1, reported.shape[-2]):  # add the targets' rows (faster than a reduction)
+        counts += reported[..., j, :]
+    return counts
 
 
 def log_likelihood(counts: NDArray, x: NDArray, v: NDArray, sensors: NDArray, p_correct: float) -> NDArray:
@@ -117,10 +126,11 @@ def simulate_targets(
     radius: float = START_RADIUS,
     speed: float = 2.0,
     velocity_var: float = VELOCITY_VAR,
+    angles: NDArray | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Tracks (x, v), each (R, T + 1, Nt, 2), from eq. 1: starts at random angles on the
-    circle of `radius`, heading for the centre at `speed`."""
-    angle = rng.uniform(0.0, 2.0 * np.pi, (n_scenarios, n_targets))
+    """Tracks (x, v), each (R, T + 1, Nt, 2), from eq. 1: starts on the circle of `radius`
+    at random angles (or `angles`, radians, (R, Nt)), heading for the centre at `speed`."""
+    angle = rng.uniform(0.0, 2.0 * np.pi, (n_scenarios, n_targets)) if angles is None else np.asarray(angles)
     unit = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
     noise = np.sqrt(velocity_var) * rng.standard_normal((n_scenarios, steps, n_targets, 2))
     v = np.concatenate([(-speed * unit)[:, None], -speed * unit[:, None] + np.cumsum(noise, axis=1)], axis=1)
@@ -134,10 +144,16 @@ def simulate_truth(
     sensors: NDArray,
     p_correct: float,
     rng: np.random.Generator,
-    **motion: float,
+    *,
+    steps: int = STEPS,
+    speed: float = 2.0,
+    velocity_var: float = VELOCITY_VAR,
+    angles: NDArray | None = None,
 ) -> Truth:
-    """Targets (`simulate_targets`, keywords passed on) and the counts the network reports."""
-    x, v = simulate_targets(n_scenarios, n_targets, rng, **motion)  # type: ignore[arg-type]
+    """Targets (`simulate_targets`) and the counts the network reports."""
+    x, v = simulate_targets(
+        n_scenarios, n_targets, rng, steps=steps, speed=speed, velocity_var=velocity_var, angles=angles
+    )
     counts = simulate_counts(x, v, sensors, p_correct, rng)
     counts[:, 0] = 0
     return Truth(x, v, counts)
