@@ -167,9 +167,11 @@ def _draw_fig5(path: Path, truth: Truth, velocities: list[NDArray], fallback: ND
         for j in range(n_targets):
             c = COLORS[j]
             true_b = bearing_deg(truth.v[0, 1:, j])
-            for t, theta in enumerate(velocities, start=1):
-                b = true_b[t - 1] + _wrap(bearing_deg(theta[0, :, j]) - true_b[t - 1])
-                ax.scatter(np.full(len(b), t) + 0.25 * (j - 1), b, s=1, color=c, alpha=0.08, lw=0)
+            b = np.array(
+                [true_b[t] + _wrap(bearing_deg(theta[0, :, j]) - true_b[t]) for t, theta in enumerate(velocities)]
+            )
+            times = np.broadcast_to(np.arange(1, len(velocities) + 1)[:, None] + 0.25 * (j - 1), b.shape)
+            ax.scatter(times.ravel(), b.ravel(), s=1, color=c, alpha=0.08, lw=0)
             ax.plot(np.arange(1, len(true_b) + 1), true_b, color=c, lw=2, label=f"target {j + 1}, true bearing")
         ax.set_xlabel("time (s); shaded: no state within epsilon (nearest draws shown)")
         ax.set_ylabel("bearing (degrees anticlockwise from east)")

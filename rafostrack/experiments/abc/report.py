@@ -59,11 +59,13 @@ def section_fig2(s: dict[str, Any]) -> list[str]:
     def verdict(key: str) -> str:
         d = p[key]
         sig = d["mean"] < -2 * d["se"]
-        return f"{_pm(d['mean'], d['se'])} ({'yes' if sig else 'no' if d['mean'] > 2 * d['se'] else 'not significant'})"
+        label = "better" if sig else "worse" if d["mean"] > 2 * d["se"] else "not significant"
+        return f"{_pm(d['mean'], d['se'])} ({label})"
 
     lines += [
         "",
-        "Paired differences (same scenarios), negative = the first is better, (yes) when more than 2 SE below 0:",
+        "Paired differences (same scenarios), negative = the first is better; (better) / (worse) when more than "
+        "2 SE from 0:",
         "",
         "| t | MCMC - ABC-PT | MCMC - ABC-RW | ABC-PT - ABC-RW | ABC-RW - ABC-Rej |",
         "|---:|---:|---:|---:|---:|",
@@ -172,10 +174,11 @@ def section_table1(s: dict[str, Any]) -> list[str]:
     ]
     for c in s["cost"]:
         swap = "" if c["swap_acceptance"] is None else f"{100 * c['swap_acceptance']:.0f}%"
+        eps = "—" if c["algorithm"] == "mcmc" else _f(c["tolerance"], 1)
         lines.append(
             f"| {c['n_targets']} | {c['n_sensors']} | {NAMES[c['algorithm']]} | {1e3 * c['seconds_per_scenario']:.0f} "
             f"| {c['simulations_per_step']} | {100 * c['acceptance']:.0f}% | {100 * c['fallback']:.0f}% | {swap} | "
-            f"{_f(c['tolerance'], 1)} |"
+            f"{eps} |"
         )
     lines += [
         "",
