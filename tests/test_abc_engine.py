@@ -18,6 +18,7 @@ from rafostrack.engines import ENGINES, SimulatingEngine, WindowPrediction, engi
 from rafostrack.engines.abc import ABCEngine, align, simulate_windows
 from rafostrack.likelihoods import RankedArrivals, arrivals_from_config
 from rafostrack.model import association_factors
+from rafostrack.tracker import Tracker
 
 WINDOW_S = 4200.0
 
@@ -185,3 +186,17 @@ def test_ranked_arrivals_pass_the_window_to_a_simulating_engine(sim_mission):
     assert not np.array_equal(arrivals.evaluate(particles, moved).loglik, first.loglik)
     reseeded = arrivals_from_config(sim_mission.beacons, sim.info, with_overrides(config, filter={"seed": 5}))
     assert not np.array_equal(reseeded.evaluate(particles, windows[0]).loglik, first.loglik)
+
+
+def test_a_float_tracked_with_abc_is_reproducible_bit_for_bit(sim_mission):
+    sim = sim_mission.floats[0]
+    record = type(sim.record)(sim.record.float_id, sim.record.path, sim.record.windows[:12])
+    config = with_overrides(load_config(), filter={"engine": "abc", "particles": 150})
+
+    def run(cfg):
+        return Tracker.from_config(cfg, sim_mission.beacons, sim.info).track(record)
+
+    a, b = run(config), run(config)
+    assert a.track.equals(b.track) and a.labels.equals(b.labels)
+    c = run(with_overrides(config, abc={"stream": 1}))
+    assert not a.track["lat"].equals(c.track["lat"])
