@@ -190,6 +190,16 @@ class ContextConfig:
 
 
 @dataclass(frozen=True)
+class ABCConfig:
+    """Approximate Bayesian computation engine (`engine = "abc"`, `rafostrack.engines.abc`)."""
+
+    tolerance_s: float = setting("> 0", _positive)
+    simulations: int = setting("between 1 and 100000", lambda v: 1 <= v <= 100_000)
+    gap_s: float = setting(">= 0 (0 = no unmatched signals allowed)", _non_negative)
+    stream: int = setting(">= 0", _non_negative)
+
+
+@dataclass(frozen=True)
 class Config:
     model: ModelConfig
     motion: MotionConfig
@@ -202,6 +212,7 @@ class Config:
     bp: BPConfig
     quality: QualityConfig
     context: ContextConfig
+    abc: ABCConfig
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return asdict(self)

@@ -136,7 +136,7 @@ def test_launch_override_without_floats_table(mission_dir, tmp_path):
     ("args", "needle"),
     [
         (["track", "nope/float1.csv"], "nope/float1.csv: file not found"),
-        (["track", "{f}", "--engine", "magic"], "[filter] engine: must be one of exact, bp, got 'magic'"),
+        (["track", "{f}", "--engine", "magic"], "[filter] engine: must be one of exact, bp, abc, got 'magic'"),
         (
             ["track", "{f}", "--method", "bp"],
             "--method was split into two options: use --likelihood ranked --engine bp",

@@ -73,7 +73,7 @@ def test_layers_apply_in_order(tmp_path):
         ("[model]\np_detect = 1.0\n", "[model] p_detect: must be strictly between 0 and 1"),
         ("[model]\ntoa_sigma_s = 'two'\n", "[model] toa_sigma_s: expected a number"),
         ("[filter]\nparticles = 10.5\n", "[filter] particles: expected a whole number"),
-        ("[filter]\nengine = 'magic'\n", "[filter] engine: must be one of exact, bp, got 'magic'"),
+        ("[filter]\nengine = 'magic'\n", "[filter] engine: must be one of exact, bp, abc, got 'magic'"),
         (
             "[filter]\nlikelihood = 'rankd'\n",
             "[filter] likelihood: must be one of ranked, unranked, labeled, got 'rankd' (did you mean 'ranked'?)",

@@ -4,7 +4,9 @@ Three evidence models, registered in `ARRIVAL_LIKELIHOODS` under the config's
 `[filter] likelihood`:
 
 - `ranked` (eqs. 14-18): the stored TOAs are the earliest of the window; the association
-  of beacons to signals is summed out by the configured engine (`rafostrack.engines`);
+  of beacons to signals is summed out by the configured engine (`rafostrack.engines`), or,
+  for a simulating engine (`abc`), the window's likelihood is estimated from windows it
+  simulates from the predicted arrivals and detection probabilities;
 - `unranked` (the paper's baseline, eq. 19): the same sum, but an unheard beacon costs
   1 - Pd whatever its predicted arrival;
 - `labeled` (eq. 20): the arrival file's `beacon_id` column as known labels.
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import zlib
 from collections.abc import Callable
 
 import numpy as np
@@ -24,7 +27,7 @@ from numpy.typing import NDArray
 from .. import model as m
 from ..config import Config, ModelConfig
 from ..domain import BeaconTable, FloatInfo, Particles, Window
-from ..engines import Engine, engine_from_config
+from ..engines import Engine, SimulatingEngine, WindowPrediction, engine_from_config
 from ..errors import InputError
 from .base import Evidence, Likelihood, outlier_scale
 
@@ -67,20 +70,43 @@ class ArrivalLikelihood(Likelihood):
 
 
 class RankedArrivals(ArrivalLikelihood):
-    """p(T_1..T_K | X): the association sum of the ranked model (or the unranked baseline)."""
+    """p(T_1..T_K | X): the association sum of the ranked model (or the unranked baseline).
 
-    def __init__(self, beacons: BeaconTable, info: FloatInfo, model: ModelConfig, engine: Engine, ranked: bool = True):
+    With a simulating engine the window itself is passed on (`engines.WindowPrediction`),
+    with the seed material of its draws: `seed` ([filter] seed), the float id and the
+    window's time."""
+
+    def __init__(
+        self,
+        beacons: BeaconTable,
+        info: FloatInfo,
+        model: ModelConfig,
+        engine: Engine | SimulatingEngine,
+        ranked: bool = True,
+        seed: int = 0,
+    ):
         super().__init__(beacons, info, model)
         self.engine = engine
         self.ranked = ranked
+        self.seed = seed
 
     def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
         window = observation
         wb = m.window_beacons(self.beacons, self.info, window.time)
         ranges = m.beacon_ranges_m(particles.lat, particles.lon, wb)
+        mu = m.predicted_toa_s(ranges, wb, self.model)
+        p_detect = m.detection_prob(ranges, wb, self.model)
+        if isinstance(self.engine, SimulatingEngine):
+            time_ns = int(np.asarray(window.time, dtype="datetime64[ns]").astype(np.int64)) % (1 << 64)
+            entropy = (self.seed, zlib.crc32(self.info.float_id.encode("utf-8")), time_ns)
+            prediction = WindowPrediction(
+                window.toa_s, mu, p_detect, self.info.max_signals, self.info.window_s, self.model, entropy, self.ranked
+            )
+            assoc = self.engine.simulate(prediction, marginals=marginals)
+            return Evidence(assoc.log_z, wb.index, assoc.p_match)
         factors = m.association_factors(
-            m.predicted_toa_s(ranges, wb, self.model),
-            m.detection_prob(ranges, wb, self.model),
+            mu,
+            p_detect,
             window.toa_s,
             max_signals=self.info.max_signals,
             window_s=self.info.window_s,
@@ -136,7 +162,7 @@ class LabelledArrivals(ArrivalLikelihood):
 ArrivalFactory = Callable[[BeaconTable, FloatInfo, Config], ArrivalLikelihood]
 
 ARRIVAL_LIKELIHOODS: dict[str, ArrivalFactory] = {
-    "ranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), ranked=True),
-    "unranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), ranked=False),
+    "ranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), True, c.filter.seed),
+    "unranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), False, c.filter.seed),
     "labeled": lambda b, i, c: LabelledArrivals(b, i, c.model),
 }
