@@ -16,6 +16,14 @@ with Lambda = lambda / W the clutter intensity and h the horizon: h = T_K when t
 is full (K = r: anything later could not have been stored), h = W otherwise. The
 `unranked` baseline (eq. 19) drops the ranking: u_i = 1 - Pd_i.
 
+Echoes (our extension): a detected signal also arrives a second time, by a longer path,
+with probability e (`echo_fraction`), Exp(mean tau) after the first (tau =
+`multipath_delay_s`); both are the source's. A beacon may then take a pair of signals
+j < j': in the matching, a direct arrival without a stored echo weighs
+w_ij (1 - e G(h - T_j)) (no echo, or one after the horizon), a pair w_ij (1 - e G(h - T_j)) E_jj'
+with E_jj' = e g(T_j' - T_j) / (Lambda (1 - e G(h - T_j))), g and G the delay's density and
+CDF (`echo_factors`). The echo factors depend on the signals only, not on the particle.
+
 Arrays are shaped (particles, beacons, signals) = (P, s, K).
 """
 
@@ -41,6 +49,7 @@ class AssociationFactors:
     log_match: NDArray[np.float64]  # (P, s, K): log w_ij
     log_unheard: NDArray[np.float64]  # (P, s): log u_i
     log_base: float  # K log Lambda - Lambda h, shared by all particles
+    log_echo: NDArray[np.float64] | None = None  # (K, K): log E_jj', the echo pair terms (None: no echoes)
 
 
 @dataclass(frozen=True)
@@ -103,6 +112,16 @@ def detection_prob(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> 
     z = (ranges_m / 1e3 - r50) / model.detection_falloff_km
     falloff = np.where(np.asarray(r50) > 0, 0.5 * (1.0 - np.tanh(0.5 * z)), 1.0)  # 1 / (1 + e^z), overflow-free
     return p * falloff
+
+
+def window_prediction(
+    beacons: BeaconTable, info: FloatInfo, model: ModelConfig, lat: NDArray, lon: NDArray, time: np.datetime64
+) -> tuple[WindowBeacons, NDArray[np.float64], NDArray[np.float64]]:
+    """The window's active beacons, and for positions (lat, lon) their predicted arrival
+    times and detection probabilities, each (P, s)."""
+    wb = window_beacons(beacons, info, time)
+    ranges = beacon_ranges_m(lat, lon, wb)
+    return wb, predicted_toa_s(ranges, wb, model), detection_prob(ranges, wb, model)
 
 
 def toa_logpdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
@@ -174,7 +193,25 @@ def association_factors(
     else:
         log_unheard = np.log1p(-p_detect)
     k = len(toa_s)
-    return AssociationFactors(log_match, log_unheard, k * np.log(lam) - lam * h)
+    log_echo = None
+    if model.echo_fraction > 0 and k:
+        no_echo, log_echo = echo_factors(toa_s, h, lam, model)
+        log_match = log_match + no_echo[None, None, :]
+    return AssociationFactors(log_match, log_unheard, k * np.log(lam) - lam * h, log_echo)
+
+
+def echo_factors(toa_s: NDArray, horizon: float, lam: float, model: ModelConfig) -> tuple[NDArray, NDArray]:
+    """The echo terms of one window, shared by every particle and beacon (module docstring):
+    log(1 - e G(h - T_j)) per signal, folded into the match factor of a direct arrival
+    without a stored echo, and log E_jj' = log(e g(T_j' - T_j) / Lambda) - log(1 - e G(h - T_j))
+    for j < j' (-inf elsewhere), with g the delay density Exp(mean tau) and G its CDF."""
+    eps, tau = model.echo_fraction, model.multipath_delay_s
+    no_echo = np.log1p(-eps * -np.expm1(-np.clip(horizon - toa_s, 0.0, None) / tau))
+    delay = toa_s[None, :] - toa_s[:, None]  # (j, j'): T_j' - T_j
+    later = np.triu(np.ones((len(toa_s), len(toa_s)), dtype=bool), k=1)
+    with np.errstate(divide="ignore"):
+        log_pair = np.where(later, np.log(eps / tau) - np.clip(delay, 0.0, None) / tau - np.log(lam), -np.inf)
+    return no_echo, log_pair - no_echo[:, None]
 
 
 def labeled_loglik(

@@ -27,7 +27,9 @@ truth at the window time. In each window, for each beacon active then
 including source drift and the float clock offset):
   * the signal is detected with probability Pd(range);
   * a detected signal arrives at mu + e, e ~ N(0, toa_sigma_s^2), plus, with probability
-    `multipath_fraction`, an Exponential(mean `multipath_delay_s`) delay;
+    `multipath_fraction`, an Exponential(mean `multipath_delay_s`) delay; with probability
+    `echo_fraction` a detected signal arrives a second time, an Exponential(mean
+    `multipath_delay_s`) later (an echo, labelled with its source);
   * clutter: N ~ Poisson(`clutter_rate`) signals, uniform on [0, window_s].
 Arrival times are quantised to `TOA_RESOLUTION_S` (0.01 s, the files' resolution; signals
 that then coincide are one received signal, keeping the first label in beacon-table order,
@@ -38,7 +40,8 @@ float stores the earliest `max_signals`; each stored TOA keeps the beacon that p
 Random draws per float: the launch eddy velocity (2 normals), then 4 normals per drift
 step; then per window, always in this order and whatever their use: uniform (detection),
 normal (TOA error), uniform (multipath) and standard exponential (delay), one of each per
-active beacon; then the clutter count and its times.
+active beacon; when `echo_fraction` > 0, a uniform (echo) and a standard exponential (its
+delay) per active beacon; then the clutter count and its times.
 
 Scenarios are in `rafostrack.scenarios`; `rafostrack.io.mission_writer.write_mission`
 writes a mission directory that `rafostrack track` reads, with the true labels as hand
@@ -248,11 +251,18 @@ def simulate_arrivals(
         delay = model.multipath_delay_s * rng.standard_exponential(s)
         detected = u_det < pd_i
         toa = mu + err + np.where(u_mp < model.multipath_fraction, delay, 0.0)
+        echoes = np.zeros(0)
+        echo_ids = np.zeros(0, dtype=object)
+        if model.echo_fraction > 0:  # drawn only then: records without echoes keep their draws
+            u_echo = rng.random(s)
+            echo_delay = model.multipath_delay_s * rng.standard_exponential(s)
+            echoed = detected & (u_echo < model.echo_fraction)
+            echoes, echo_ids = (toa + echo_delay)[echoed], ids[wb.index[echoed]]
         n_clutter = int(rng.poisson(model.clutter_rate))
         clutter = rng.uniform(0.0, info.window_s, n_clutter)
 
-        arr = np.concatenate([toa[detected], clutter])
-        lab = np.concatenate([ids[wb.index[detected]], np.full(n_clutter, None, dtype=object)])
+        arr = np.concatenate([toa[detected], echoes, clutter])
+        lab = np.concatenate([ids[wb.index[detected]], echo_ids, np.full(n_clutter, None, dtype=object)])
         arr = np.round(arr, _TOA_DECIMALS) + 0.0  # quantise; + 0.0 turns -0.0 into 0.0
         inside = (arr >= 0.0) & (arr <= info.window_s)
         arr, lab = arr[inside], lab[inside]

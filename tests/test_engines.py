@@ -6,6 +6,7 @@ each beacon at most once and sums the products of the factors directly in float6
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -28,31 +29,42 @@ ENGINES: dict[str, Engine] = {name: e for name, e in BUILT.items() if not isinst
 MARGINAL_TOL = {"exact": 1e-9, "bp": 1e-6}
 
 
-def oracle(log_match: NDArray, log_unheard: NDArray) -> tuple[NDArray, NDArray]:
-    """(log Z, pair marginals) by enumerating all partial matchings, per particle."""
+def oracle(log_match: NDArray, log_unheard: NDArray, log_echo: NDArray | None = None) -> tuple[NDArray, NDArray]:
+    """(log Z, pair marginals) by enumerating every role of every signal, per particle:
+    clutter, beacon i's first arrival, or (with `log_echo`) beacon i's echo, an echo
+    needing the same beacon's first arrival at an earlier signal; each beacon has at most
+    one of each."""
     n, s, k = log_match.shape
     w = np.exp(log_match)
     u = np.exp(log_unheard)
-    # Signal j's source: beacon index, or s for clutter. Keep the injective ones.
-    rows = [a for a in itertools.product(range(s + 1), repeat=k) if _injective(a, s)]
-    assign = np.array(rows, dtype=np.intp).reshape(len(rows), k)  # (M, K)
-    w_ext = np.concatenate([w, np.ones((n, 1, k))], axis=1)  # clutter weighs 1
-    terms = np.ones((n, len(assign)))
-    for j in range(k):
-        terms *= w_ext[:, assign[:, j], j]
-    heard = (assign[:, :, None] == np.arange(s)).any(axis=1)  # (M, s)
-    terms *= np.where(heard[None], 1.0, u[:, None, :]).prod(axis=2)
-    z = terms.sum(axis=1)
+    echo = np.zeros((k, k)) if log_echo is None else np.exp(log_echo)
+    # Role of signal j: 0 = clutter, 1 + i = beacon i's first arrival, 1 + s + i = its echo.
+    terms, owners = [], []
+    for roles in itertools.product(range(1 + (2 if log_echo is not None else 1) * s), repeat=k):
+        first = {r - 1: j for j, r in enumerate(roles) if 1 <= r <= s}
+        echoes = [(r - 1 - s, j) for j, r in enumerate(roles) if r > s]
+        if sum(1 <= r <= s for r in roles) != len(first) or len({i for i, _ in echoes}) != len(echoes):
+            continue
+        if any(i not in first or first[i] >= j for i, j in echoes):
+            continue
+        term = np.ones(n)
+        for i, j in first.items():
+            term = term * w[:, i, j]
+        for i, j in echoes:
+            term = term * echo[first[i], j]
+        for i in range(s):
+            if i not in first:
+                term = term * u[:, i]
+        terms.append(term)
+        owners.append([(r - 1) % s if r else -1 for r in roles])
+    t = np.array(terms)  # (M, n)
+    z = t.sum(axis=0)
+    owner = np.array(owners, dtype=np.intp).reshape(len(owners), k)
     p_match = np.zeros((n, s, k))
     for i in range(s):
         for j in range(k):
-            p_match[:, i, j] = terms[:, assign[:, j] == i].sum(axis=1) / z
+            p_match[:, i, j] = t[owner[:, j] == i].sum(axis=0) / z
     return np.log(z), p_match
-
-
-def _injective(assignment: tuple[int, ...], s: int) -> bool:
-    used = [a for a in assignment if a < s]
-    return len(used) == len(set(used))
 
 
 def random_forest_mask(rng: np.random.Generator, s: int, k: int) -> NDArray[np.bool_]:
@@ -99,8 +111,10 @@ def dense_case(seed: int, *, n: int = 4) -> tuple[NDArray, NDArray]:
     return log_match, log_unheard
 
 
-def assert_matches_oracle(result: Association, log_match: NDArray, log_unheard: NDArray, tol: float) -> None:
-    log_z, p_match = oracle(log_match, log_unheard)
+def assert_matches_oracle(
+    result: Association, log_match: NDArray, log_unheard: NDArray, tol: float, log_echo: NDArray | None = None
+) -> None:
+    log_z, p_match = oracle(log_match, log_unheard, log_echo)
     np.testing.assert_allclose(result.log_z, log_z, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(result.p_match, p_match, rtol=0, atol=tol)
 
@@ -136,6 +150,38 @@ def test_exact_corner_shapes_match_oracle(shape: tuple[int, int, int]) -> None:
     log_match = rng.uniform(-30, 30, shape)
     log_unheard = rng.uniform(-10, 3, shape[:2])
     assert_matches_oracle(exact.associate(log_match, log_unheard), log_match, log_unheard, 1e-9)
+
+
+def echo_case(seed: int) -> tuple[NDArray, NDArray, NDArray]:
+    """Dense factors with echo pair terms (upper triangle finite; some pairs impossible)."""
+    log_match, log_unheard = dense_case(seed)
+    rng = np.random.default_rng(10_000 + seed)
+    k = log_match.shape[2]
+    log_echo = np.where(np.triu(np.ones((k, k), dtype=bool), 1), rng.uniform(-6.0, 4.0, (k, k)), -np.inf)
+    log_echo[rng.random((k, k)) < 0.2] = -np.inf
+    return log_match, log_unheard, log_echo
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_exact_with_echoes_matches_oracle(seed: int) -> None:
+    log_match, log_unheard, log_echo = echo_case(seed)
+    result = exact.associate(log_match, log_unheard, log_echo=log_echo)
+    assert_matches_oracle(result, log_match, log_unheard, 1e-9, log_echo)
+
+
+def test_echo_factors_of_a_realistic_window_match_oracle() -> None:
+    """The model's echo terms (`model.echo_factors`) through the exact engine: two arrivals
+    20 s apart near one beacon's prediction are both that beacon's, not one and clutter
+    (the echo : clutter odds are e g(20.5 s) / Lambda = 0.05 * exp(-1.025) / 20 * 4200 ~ 3.8)."""
+    model = dataclasses.replace(load_config().model, echo_fraction=0.05, multipath_delay_s=20.0)
+    mu = np.array([[1000.0, 2500.0, 3100.0]])
+    toa = np.array([1000.5, 1021.0, 2499.0])
+    f = association_factors(mu, np.full(mu.shape, 0.9), toa, max_signals=4, window_s=model.window_s, model=model)
+    result = exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo)
+    assert_matches_oracle(result, f.log_match, f.log_unheard, 1e-9, f.log_echo)
+    assert result.p_match[0, 0, 0] > 0.99 and result.p_match[0, 0, 1] == pytest.approx(3.77 / 4.77, abs=0.02)
+    without = exact.associate(f.log_match, f.log_unheard)
+    assert without.p_match[0, 0, 1] < 0.01  # no echoes: the second arrival is clutter
 
 
 def test_bp_bethe_bound_and_valid_marginals() -> None:

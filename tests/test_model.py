@@ -36,7 +36,7 @@ def _loglik(mu, p_detect, toas, max_signals, window_s, model, ranked=True) -> fl
         model=model,
         ranked=ranked,
     )
-    return float(f.log_base + exact.associate(f.log_match, f.log_unheard).log_z[0])
+    return float(f.log_base + exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo).log_z[0])
 
 
 @pytest.mark.parametrize("multipath", [0.0, 0.2])
@@ -61,10 +61,22 @@ def test_likelihood_integrates_to_one_r2():
     assert p0 + p1 + p2 == pytest.approx(1.0, abs=1e-6)
 
 
+def test_likelihood_with_echoes_integrates_to_one_r2():
+    """r = 2, two beacons, echoes (40%) and multipath: P(K=0) + int p(T1) + int int p(T1, T2) = 1."""
+    model = _model(toa_sigma_s=1.5, clutter_rate=1.3, multipath_fraction=0.1, multipath_delay_s=3.0, echo_fraction=0.4)
+    mu, w, pd = np.array([6.0, 12.0]), 20.0, 0.75
+    p0 = np.exp(_loglik(mu, pd, [], 2, w, model))
+    p1, _ = integrate.quad(lambda t: np.exp(_loglik(mu, pd, [t], 2, w, model)), 0, w, points=list(mu), limit=200)
+    p2, _ = integrate.dblquad(
+        lambda t2, t1: np.exp(_loglik(mu, pd, [t1, t2], 2, w, model)), 0, w, lambda t1: t1, w, epsabs=1e-9
+    )
+    assert p0 + p1 + p2 == pytest.approx(1.0, abs=1e-6)
+
+
 def test_ranking_penalises_a_beacon_predicted_early_but_not_stored():
     """A full window whose TOAs all come after beacon 0's prediction: positions that put
     beacon 0 early are unlikely under the ranked model, indifferent under the baseline."""
-    model = _model(toa_sigma_s=1.0, clutter_rate=0.1)
+    model = _model(toa_sigma_s=1.0, clutter_rate=0.1, multipath_fraction=0.0)
     toas = [50.0, 60.0]
     early = np.array([10.0, 50.0, 60.0])  # beacon 0 should have been stored first
     late = np.array([90.0, 50.0, 60.0])  # beacon 0 arrives after the last stored TOA

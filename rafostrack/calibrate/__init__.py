@@ -22,6 +22,7 @@ config file or flag is kept as set, not estimated; every estimate is reported in
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Set
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,8 +34,9 @@ from ..config import Config, with_overrides
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo, elapsed_days
 from ..estimates import Estimate
 from . import kalman
+from .association import fit_association
 from .detection import fit_detection
-from .noise import direct_probability, fit_clutter_rate, fit_multipath
+from .noise import direct_probability, fit_multipath
 
 MIN_ARRIVALS = 60  # fewer confident arrivals than this: no calibration
 CONFIDENT_PROB = 0.9
@@ -47,6 +49,7 @@ CALIBRATED_KEYS = (
     ("model", "multipath_fraction"),
     ("model", "multipath_delay_s"),
     ("model", "clutter_rate"),
+    ("model", "echo_fraction"),
     ("motion", "mean_current_east_km_per_day"),
     ("motion", "mean_current_north_km_per_day"),
     ("motion", "velocity_sd_km_per_day"),
@@ -69,10 +72,7 @@ class Calibration:
 
     def apply(self, config: Config) -> Config:
         """`config` with the estimated keys set."""
-        layer: dict[str, dict[str, Any]] = {}
-        for (section, key), value in self.values.items():
-            layer.setdefault(section, {})[key] = value
-        return with_overrides(config, **layer) if layer else config
+        return _with_values(config, self.values, set())
 
     def nuisance_cov_at(self, times: NDArray[np.datetime64]) -> NDArray[np.float64]:
         """(n, 2, 2) nuisance covariance at `times`, from the nearest node."""
@@ -136,6 +136,25 @@ def _problem(
         slowness_s_per_m=1.0 / config.model.sound_speed_m_s,
     )
     return problem, heard, mid
+
+
+def _with_values(config: Config, values: dict[tuple[str, str], float], explicit: Set[tuple[str, str]]) -> Config:
+    """`config` with the estimated values that the user did not set."""
+    layer: dict[str, dict[str, Any]] = {}
+    for (section, key), value in values.items():
+        if (section, key) not in explicit:
+            layer.setdefault(section, {})[key] = value
+    return with_overrides(config, **layer) if layer else config
+
+
+def _track_at(
+    record: ArrivalRecord, node_time: NDArray[np.datetime64], lat: NDArray, lon: NDArray
+) -> tuple[NDArray, NDArray]:
+    """Positions at every window of `record`, linear in time between the smoother's nodes."""
+    t = np.array([w.time for w in record.windows], dtype="datetime64[ns]").astype(np.int64).astype(float)
+    nodes = node_time.astype("datetime64[ns]").astype(np.int64).astype(float)
+    unwrapped = np.degrees(np.unwrap(np.radians(lon)))
+    return np.interp(t, nodes, lat), (np.interp(t, nodes, unwrapped) + 180.0) % 360.0 - 180.0
 
 
 def _corrected_beacons(beacons: BeaconTable, heard: NDArray[np.intp], fit: kalman.KalmanFit) -> BeaconTable:
@@ -218,31 +237,36 @@ def calibrate(
         motion.velocity_sd_km_per_day, motion.decorrelation_days, model.toa_sigma_s, INITIAL_CLOCK_RATE_SD_S_PER_DAY
     )
     fit = kalman.fit(problem, start, weight_of, mid)
-    fitted = noise["model"]
-    clutter = fit_clutter_rate(estimate.labels["p_clutter"].to_numpy(dtype=float), record, info)
     hyper = fit.hyper
     values: dict[tuple[str, str], float] = {
         ("model", "sound_speed_m_s"): round(fit.sound_speed_m_s, 2),
         ("model", "toa_sigma_s"): round(hyper.toa_sigma_s, 3),
-        ("model", "multipath_fraction"): round(max(fitted.multipath_fraction, 1e-3), 4),
-        ("model", "multipath_delay_s"): round(fitted.multipath_delay_s, 2),
-        ("model", "clutter_rate"): round(max(clutter, 0.05), 3),
         ("motion", "mean_current_east_km_per_day"): round(float(fit.mean_current_km_per_day[0]), 3),
         ("motion", "mean_current_north_km_per_day"): round(float(fit.mean_current_km_per_day[1]), 3),
         ("motion", "velocity_sd_km_per_day"): round(hyper.velocity_sd_km_per_day, 3),
         ("motion", "decorrelation_days"): round(hyper.decorrelation_days, 2),
         # The random walk with the same long-time spread: D^2 = 2 sigma_v^2 T per axis per day.
         ("motion", "diffusion_km_per_day"): round(
-            hyper.velocity_sd_km_per_day * np.sqrt(2 * hyper.decorrelation_days), 3
+            hyper.velocity_sd_km_per_day * float(np.sqrt(2 * hyper.decorrelation_days)), 3
         ),
     }
-    values = {k: v for k, v in values.items() if k not in explicit}
     corrected = _corrected_beacons(beacons, heard, fit)
-    fitted_model = with_overrides(config, model={k: v for (s, k), v in values.items() if s == "model"}).model
     clocked = dataclasses.replace(info, clock_residual=(problem.time, fit.clock_s))
-    p, r50, detection_report = _detection(estimate, record, corrected, clocked, fitted_model)
+    timed = _with_values(config, values, explicit).model
+    p, r50, detection_report = _detection(estimate, record, corrected, clocked, timed)
     if beacons.p_detect is None and beacons.detection_range_km is None:
         corrected = dataclasses.replace(corrected, p_detect=p, detection_range_km=r50)
+    lat, lon = _track_at(record, problem.time, fit.lat, fit.lon)
+    position_sd = float(np.median(np.sqrt(0.5 * np.trace(fit.position_cov_km2, axis1=1, axis2=2))))
+    start_noise = dataclasses.replace(timed, multipath_fraction=max(noise["model"].multipath_fraction, 0.02))
+    associated, association_report = fit_association(record, lat, lon, corrected, clocked, start_noise, position_sd)
+    values |= {
+        ("model", "multipath_fraction"): round(associated.multipath_fraction, 4),
+        ("model", "multipath_delay_s"): round(associated.multipath_delay_s, 2),
+        ("model", "echo_fraction"): round(associated.echo_fraction, 4),
+        ("model", "clutter_rate"): round(associated.clutter_rate, 3),
+    }
+    values = {k: v for k, v in values.items() if k not in explicit}
     ids = [str(b) for b in beacons.beacon_id]
     direct = fit.weight > 0.5
     report = {
@@ -250,6 +274,7 @@ def calibrate(
         "windows_used": int(np.unique(problem.node).size),
         "residual_rms_s": round(float(np.sqrt(np.mean(fit.toa_residual_s[direct] ** 2))), 3),
         "clock_rate_sd_s_per_day": round(hyper.clock_rate_sd_s_per_day, 5),
+        "association": association_report,
         "log_evidence": round(fit.log_evidence, 2),
         "values": {f"[{s}] {k}": v for (s, k), v in values.items()},
         "kept_as_configured": sorted(f"[{s}] {k}" for s, k in explicit if (s, k) in CALIBRATED_KEYS),

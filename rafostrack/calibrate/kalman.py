@@ -414,9 +414,9 @@ def fit_hyper(lin: Linearised, hyper: Hyper) -> Hyper:
     return Hyper.from_vector(best.x)
 
 
-def nuisance_cov_km2(lin: Linearised, hyper: Hyper) -> NDArray[np.float64]:
-    """(K, 2, 2) position covariance due to the clock and timing unknowns at each node:
-    [N^-1]_pp - [N_xx^-1]_pp (module docstring)."""
+def position_covariances(lin: Linearised, hyper: Hyper) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(K, 2, 2) posterior position covariance at each node, [N^-1]_pp, and the part of it
+    due to the clock and timing unknowns, [N^-1]_pp - [N_xx^-1]_pp (module docstring)."""
     problem = lin.problem
     normal = lin.normal(hyper).jtj
     k = np.arange(problem.n_nodes)
@@ -425,7 +425,7 @@ def nuisance_cov_km2(lin: Linearised, hyper: Hyper) -> NDArray[np.float64]:
     given = BorderedBanded(normal[motion][:, motion], 4 * problem.n_nodes, 7).diagonal_blocks_of_inverse(4 * k, 2)
     out = total - given
     values, vectors = np.linalg.eigh(0.5 * (out + out.transpose(0, 2, 1)))  # PSD up to round-off
-    return np.einsum("kij,kj,klj->kil", vectors, np.clip(values, 0.0, None), vectors)
+    return total, np.einsum("kij,kj,klj->kil", vectors, np.clip(values, 0.0, None), vectors)
 
 
 @dataclass(frozen=True)
@@ -445,7 +445,8 @@ class KalmanFit:
     drift_s_per_day: NDArray[np.float64]  # (H,)
     toa_residual_s: NDArray[np.float64]  # (J,)
     weight: NDArray[np.float64]  # (J,) EM weights of the arrivals (P(direct path))
-    nuisance_cov_km2: NDArray[np.float64]  # (K, 2, 2)
+    position_cov_km2: NDArray[np.float64]  # (K, 2, 2) posterior covariance of the positions
+    nuisance_cov_km2: NDArray[np.float64]  # (K, 2, 2) the part of it due to clock and timing
     log_evidence: float
 
     def track(self, time: NDArray[np.datetime64]) -> pd.DataFrame:
@@ -476,6 +477,7 @@ def fit(
     lin = linearise(problem, u, weight, priors)
     _, log_ml = solve_step(lin, hyper)
     lat, lon = _positions(problem, u)
+    total, nuisance = position_covariances(lin, hyper)
     k = np.arange(problem.n_nodes)
     s0 = problem.slowness_s_per_m
     ds = u[problem.ds]
@@ -495,6 +497,7 @@ def fit(
         drift_s_per_day=d,
         toa_residual_s=lin.toa_residual_s,
         weight=weight,
-        nuisance_cov_km2=nuisance_cov_km2(lin, hyper),
+        position_cov_km2=total,
+        nuisance_cov_km2=nuisance,
         log_evidence=log_ml,
     )

@@ -4,7 +4,9 @@ A simulating engine (`base.SimulatingEngine`): it never evaluates the factors w_
 For each particle X it simulates S windows from the model (`simulate_windows`: one window
 of `rafostrack.simulate`'s generative model, vectorised: each beacon detected with
 probability Pd, arriving at mu + N(0, sigma^2) plus, with probability `multipath_fraction`,
-an Exp(`multipath_delay_s`) delay; Poisson(`clutter_rate`) clutter uniform on [0, W];
+an Exp(`multipath_delay_s`) delay, and with probability `echo_fraction` a second arrival
+(an echo) an Exp(`multipath_delay_s`) later, labelled with the same beacon;
+Poisson(`clutter_rate`) clutter uniform on [0, W];
 signals outside [0, W] lost; the float stores the earliest r), and compares each with the
 stored TOAs T_1 < ... < T_K by a matching distance
     rho = min over partial matchings M of observed to simulated signals of
@@ -29,7 +31,8 @@ of beacon i (unmatched, or matched to simulated clutter: clutter).
 
 Random draws: a Generator seeded with the window's entropy (the [filter] seed, the float
 id, the window time; `base.WindowPrediction`) and `stream`, drawn in a fixed order
-(detection uniforms, TOA normals, multipath uniforms and exponentials, each (S, s);
+(detection uniforms, TOA normals, multipath uniforms and exponentials, echo uniforms and
+exponentials, each (S, s);
 clutter counts (S,); clutter times (S, max count)). They are common to all particles
 (common random numbers): simulation s of every particle uses the same detection draws,
 noise, delays and clutter, so that the weights of nearby particles differ by their
@@ -75,14 +78,17 @@ def simulate_windows(
     toa = mu_s[:, None, :] + model.toa_sigma_s * rng.standard_normal(shape)
     delayed = rng.random(shape) < model.multipath_fraction
     toa = toa + np.where(delayed, model.multipath_delay_s * rng.standard_exponential(shape), 0.0)
+    echoed = rng.random(shape) < model.echo_fraction
+    echo = toa + model.multipath_delay_s * rng.standard_exponential(shape)
     received = detected & (toa >= 0.0) & (toa <= window_s)
+    echo_received = received & echoed & (echo <= window_s)
     n_clutter = rng.poisson(model.clutter_rate, n_sims)
     most = int(n_clutter.max()) if n_clutter.size else 0
     clutter = rng.uniform(0.0, window_s, (n_sims, most))
     clutter = np.broadcast_to(np.where(np.arange(most) < n_clutter[:, None], clutter, np.inf), (n, n_sims, most))
-    times = np.concatenate([np.where(received, toa, np.inf), clutter], axis=-1)
-    labels = np.concatenate([np.arange(s), np.full(most, s)]).astype(np.intp)
-    width = s + most if max_signals is None else min(max_signals, s + most)
+    times = np.concatenate([np.where(received, toa, np.inf), np.where(echo_received, echo, np.inf), clutter], axis=-1)
+    labels = np.concatenate([np.arange(s), np.arange(s), np.full(most, s)]).astype(np.intp)
+    width = 2 * s + most if max_signals is None else min(max_signals, 2 * s + most)
     order = np.argsort(times, axis=-1, kind="stable")[..., :width]
     stored = np.take_along_axis(times, order, axis=-1)
     return stored, np.where(np.isfinite(stored), labels[order], NONE)

@@ -34,7 +34,8 @@ from ..config import Config, ModelConfig
 @dataclass(frozen=True)
 class Association:
     log_z: NDArray[np.float64]  # (P,)
-    p_match: NDArray[np.float64]  # (P, s, K): P(signal j from beacon i | X)
+    p_match: NDArray[np.float64]  # (P, s, K): P(signal j from beacon i | X), first arrival or echo
+    p_echo: NDArray[np.float64] | None = None  # (P, s, K): P(signal j is beacon i's echo | X), if summed
 
     @property
     def p_clutter(self) -> NDArray[np.float64]:
@@ -43,7 +44,9 @@ class Association:
 
 
 class Engine(Protocol):
-    def __call__(self, log_match: NDArray, log_unheard: NDArray, *, marginals: bool = True) -> Association: ...
+    def __call__(
+        self, log_match: NDArray, log_unheard: NDArray, *, marginals: bool = True, log_echo: NDArray | None = None
+    ) -> Association: ...
 
 
 @dataclass(frozen=True)

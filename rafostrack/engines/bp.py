@@ -40,11 +40,14 @@ def associate(
     tolerance: float = 1e-9,
     max_iterations: int = 500,
     marginals: bool = True,
+    log_echo: NDArray | None = None,
 ) -> Association:
     """Bethe estimate of log Z and BP pair marginals (see module docstring).
 
     `marginals` is accepted for the common engine interface; BP's marginals are its
     beliefs, which the Bethe estimate needs anyway, so they are always returned.
+    `log_echo` is accepted and not used: the graph pairs each beacon with one signal, so
+    to BP an echo (a source's second arrival) is clutter; the exact engine sums them.
 
     Particles whose messages have not converged after `max_iterations` get the beliefs of
     the last iteration.

@@ -92,10 +92,9 @@ class RankedArrivals(ArrivalLikelihood):
 
     def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
         window = observation
-        wb = m.window_beacons(self.beacons, self.info, window.time)
-        ranges = m.beacon_ranges_m(particles.lat, particles.lon, wb)
-        mu = m.predicted_toa_s(ranges, wb, self.model)
-        p_detect = m.detection_prob(ranges, wb, self.model)
+        wb, mu, p_detect = m.window_prediction(
+            self.beacons, self.info, self.model, particles.lat, particles.lon, window.time
+        )
         if isinstance(self.engine, SimulatingEngine):
             time_ns = int(np.asarray(window.time, dtype="datetime64[ns]").astype(np.int64)) % (1 << 64)
             entropy = (self.seed, zlib.crc32(self.info.float_id.encode("utf-8")), time_ns)
@@ -113,7 +112,7 @@ class RankedArrivals(ArrivalLikelihood):
             model=self.model,
             ranked=self.ranked,
         )
-        assoc = self.engine(factors.log_match, factors.log_unheard, marginals=marginals)
+        assoc = self.engine(factors.log_match, factors.log_unheard, marginals=marginals, log_echo=factors.log_echo)
         return Evidence(factors.log_base + assoc.log_z, wb.index, assoc.p_match)
 
 

@@ -1,0 +1,107 @@
+"""Multipath, echoes and clutter of a record, by EM at the calibrated track.
+
+The timing fit (`kalman`) uses only confidently labelled arrivals, which a first pass with a
+model that under-rates multipath rarely gives to delayed arrivals: their share would be
+under-estimated, and the next pass would call them clutter again. Here every stored TOA
+counts. At the calibrated track x (every window's position, interpolated between the
+smoother's nodes), with the calibrated timing:
+
+E-step: per window, the exact association marginals at x (`engines.exact`: P(signal j is
+    beacon i's first arrival), P(... its echo), P(clutter)), the first arrival split into
+    direct and delayed by the error density's components, P(delayed | r) = eps EMG(r) / f(r)
+    (`model.toa_logpdf`), r = T_j - mu_i; and the delay's posterior mean given it was
+    delayed, E[d | r] = m + sigma phi(m / sigma) / Phi(m / sigma), m = r - sigma^2 / tau
+    (a Gaussian error plus an Exp(mean tau) delay, truncated to d > 0).
+M-step: eps = E[#delayed] / E[#first arrivals]; tau = E[sum of delays] / E[#delayed];
+    e = E[#echoes] / E[#first arrivals whose echo could have been stored], an echo of a
+    first arrival at T_j being stored only before the horizon h: weight G(h - T_j);
+    clutter rate from the clutter probabilities (`noise.fit_clutter_rate`).
+
+The track is uncertain by a few km: the E-step widens sigma by the arrival-time sd that the
+track's position error makes (km / 1.48 km/s), so that an arrival a few sd off the track's
+prediction is not taken for multipath.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import log_ndtr
+
+from .. import model as m
+from ..config import ModelConfig
+from ..domain import ArrivalRecord, BeaconTable, FloatInfo
+from ..engines import exact
+from .noise import fit_clutter_rate
+
+KM_PER_S = 1.48  # range per second of arrival time
+ITERATIONS = 8
+MIN_FRACTION = 1e-3  # multipath and echo fractions are kept above this (never exactly off)
+
+
+def _delay_mean(resid_s: NDArray, sigma: float, tau: float) -> NDArray:
+    """E[d | r] for r = g + d, g ~ N(0, sigma^2), d ~ Exp(mean tau) (module docstring)."""
+    mean = resid_s - sigma * sigma / tau
+    z = mean / sigma
+    return mean + sigma * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z))
+
+
+def fit_association(
+    record: ArrivalRecord,
+    lat: NDArray,
+    lon: NDArray,
+    beacons: BeaconTable,
+    info: FloatInfo,
+    model: ModelConfig,
+    position_sd_km: float,
+) -> tuple[ModelConfig, dict[str, float]]:
+    """`model` with multipath fraction and delay, echo fraction and clutter rate fitted at the
+    track (lat, lon: one position per window of `record`), and a report of them."""
+    sigma_e = float(np.hypot(model.toa_sigma_s, position_sd_km / KM_PER_S))
+    fitted = model
+    windows = [(w, la, lo) for w, la, lo in zip(record.windows, lat, lon, strict=True) if w.n_signals]
+    p_clutter = np.zeros(sum(w.n_signals for w, _, _ in windows))
+    for _ in range(ITERATIONS):
+        e_model = dataclasses.replace(fitted, toa_sigma_s=sigma_e)
+        first = delayed = delay_sum = echoes = echo_chances = 0.0
+        at = 0
+        for window, la, lo in windows:
+            _, mu, p_detect = m.window_prediction(beacons, info, e_model, np.array([la]), np.array([lo]), window.time)
+            h = m.horizon_s(window.toa_s, info.max_signals, info.window_s)
+            f = m.association_factors(
+                mu, p_detect, window.toa_s, max_signals=info.max_signals, window_s=info.window_s, model=e_model
+            )
+            assoc = exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo)
+            p_echo = assoc.p_echo[0] if assoc.p_echo is not None else np.zeros_like(assoc.p_match[0])
+            p_first = assoc.p_match[0] - p_echo  # (s, K)
+            resid = window.toa_s[None, :] - mu[0][:, None]
+            direct = dataclasses.replace(e_model, multipath_fraction=0.0)
+            p_delayed = 1.0 - np.exp(
+                np.log1p(-e_model.multipath_fraction) + m.toa_logpdf(resid, direct) - m.toa_logpdf(resid, e_model)
+            )
+            first += p_first.sum()
+            delayed += float(np.sum(p_first * p_delayed))
+            delay = np.clip(_delay_mean(resid, sigma_e, fitted.multipath_delay_s), 0.0, None)
+            delay_sum += float(np.sum(p_first * p_delayed * delay))
+            echoes += p_echo.sum()
+            stored = -np.expm1(-np.clip(h - window.toa_s, 0.0, None) / fitted.multipath_delay_s)  # G(h - T_j)
+            echo_chances += float(np.sum(p_first * stored[None, :]))
+            p_clutter[at : at + window.n_signals] = assoc.p_clutter[0]
+            at += window.n_signals
+        eps = float(np.clip(delayed / max(first, 1e-9), MIN_FRACTION, 0.5))
+        tau = float(np.clip(delay_sum / max(delayed, 1e-9), 5.0, 200.0))
+        echo = float(np.clip(echoes / max(echo_chances, 1e-9), MIN_FRACTION, 0.5))
+        clutter = max(fit_clutter_rate(p_clutter, record, info), 0.05)
+        fitted = dataclasses.replace(
+            fitted, multipath_fraction=eps, multipath_delay_s=tau, echo_fraction=echo, clutter_rate=clutter
+        )
+    report = {
+        "multipath_fraction": round(fitted.multipath_fraction, 4),
+        "multipath_delay_s": round(fitted.multipath_delay_s, 2),
+        "echo_fraction": round(fitted.echo_fraction, 4),
+        "clutter_rate": round(fitted.clutter_rate, 3),
+        "e_step_toa_sigma_s": round(sigma_e, 3),
+    }
+    return fitted, report
