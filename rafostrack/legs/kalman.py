@@ -123,7 +123,7 @@ def initial_params(times: NDArray, y: NDArray) -> CVParams:
 
 
 def em_cv(
-    times: NDArray, y: NDArray, iterations: int = 60, tol: float = 1e-5, start: CVParams | None = None
+    times: NDArray, y: NDArray, iterations: int = 100, tol: float = 1e-6, start: CVParams | None = None
 ) -> tuple[CVParams, list[float]]:
     """EM for q, R and x0 (module docstring); stops when the log-likelihood gains less than
     `tol` (relative). Returns the parameters and the log-likelihood of each iteration."""
@@ -155,7 +155,7 @@ def em_cv(
 
 
 def cv_estimates(
-    meas_times: NDArray, meas_xy: NDArray, eval_times: NDArray, iterations: int = 60
+    meas_times: NDArray, meas_xy: NDArray, eval_times: NDArray, iterations: int = 100
 ) -> tuple[NDArray, NDArray, CVParams]:
     """EM on the measurements, then the filtered and the smoothed positions (n_eval, 2) at
     `eval_times` (the filter predicts between measurements)."""
