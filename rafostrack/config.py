@@ -156,6 +156,20 @@ class BPConfig:
 
 
 @dataclass(frozen=True)
+class LegsConfig:
+    """`rafostrack legs`: the leg model's prior, the sampler and the likelihood grids (`rafostrack.legs`)."""
+
+    iterations: int = setting(">= 100", lambda v: v >= 100)
+    duration_min_days: float = setting("> 0", _positive)
+    duration_max_days: float = setting("> 0", _positive)
+    speed_mean_km_per_day: float = setting(">= 0", _non_negative)
+    speed_sd_km_per_day: float = setting("> 0", _positive)
+    heading_change_sd_deg: float = setting("> 0", _positive)
+    grid_spacing_km: float = setting("> 0", _positive)
+    grid_half_width_km: float = setting("> 0", _positive)
+
+
+@dataclass(frozen=True)
 class Config:
     model: ModelConfig
     motion: MotionConfig
@@ -166,6 +180,7 @@ class Config:
     smoother: SmootherConfig
     ambiguity: AmbiguityConfig
     bp: BPConfig
+    legs: LegsConfig
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return asdict(self)

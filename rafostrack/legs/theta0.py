@@ -44,8 +44,11 @@ def data_driven_start(
     score: Callable[[NDArray, NDArray], float] = paper_score,
     start_time: float | None = None,
     end_time: float | None = None,
+    objective: Callable[[Legs], float] | None = None,
 ) -> Legs:
-    """The best-scoring equal-duration guess over `leg_counts` (module docstring)."""
+    """The best-scoring equal-duration guess over `leg_counts` (module docstring); with
+    `objective` (lower is better, e.g. minus the log posterior), that ranks the guesses
+    instead of the score."""
     t0 = float(data.times[0] if start_time is None else start_time)
     t1 = float(data.times[-1] if end_time is None else end_time)
     span = t1 - t0
@@ -56,7 +59,7 @@ def data_driven_start(
     best: tuple[float, Legs] | None = None
     for k in valid:
         legs = equal_legs(data, k, t0, t1)
-        s = score(positions(legs, data.times), data.xy)
+        s = objective(legs) if objective is not None else score(positions(legs, data.times), data.xy)
         if best is None or s < best[0]:
             best = (s, legs)
     assert best is not None
