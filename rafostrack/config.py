@@ -165,6 +165,7 @@ class LegsConfig:
     speed_mean_km_per_day: float = setting(">= 0", _non_negative)
     speed_sd_km_per_day: float = setting("> 0", _positive)
     heading_change_sd_deg: float = setting("> 0", _positive)
+    wiggle_max_km: float = setting(">= 0", _non_negative)
     grid_spacing_km: float = setting("> 0", _positive)
     grid_half_width_km: float = setting("> 0", _positive)
 

@@ -29,7 +29,10 @@ class Quadratic:
 
 def _grids():
     truth = np.array([[10.0, -5.0], [40.0, 3.0]])
-    windows = [Window(np.datetime64("2010-01-01"), np.array([0.0])), Window(np.datetime64("2010-01-02"), np.array([1.0]))]
+    windows = [
+        Window(np.datetime64("2010-01-01"), np.array([0.0])),
+        Window(np.datetime64("2010-01-02"), np.array([1.0])),
+    ]
     lik = Quadratic(truth)
     centres = truth + np.array([[2.0, 1.0], [-3.0, 0.5]])
     return build_grids(lik, windows, centres, PLANE, 1.0, 6.0), lik, truth, centres  # type: ignore[arg-type]
@@ -56,8 +59,10 @@ def test_bilinear_between_nodes_and_penalty_outside():
 
 
 def test_float_evidence_orders_windows_and_fixes():
-    grids, _, truth, centres = _grids()
-    ev = float_evidence(np.array([1.0, 2.0]), grids, [(0.0, np.array([0.0, 0.0]), 2.0), (3.0, np.array([5.0, 5.0]), 1.0)], 3.0)
+    grids, _, truth, _ = _grids()
+    ev = float_evidence(
+        np.array([1.0, 2.0]), grids, [(0.0, np.array([0.0, 0.0]), 2.0), (3.0, np.array([5.0, 5.0]), 1.0)], 3.0
+    )
     np.testing.assert_array_equal(ev.times, [0, 1, 2, 3])
     np.testing.assert_array_equal(ev.kind, [FIX, WINDOW, WINDOW, FIX])
     xy = np.array([[1.0, 0.0], truth[0], truth[1], [5.0, 6.0]])

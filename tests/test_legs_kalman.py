@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rafostrack.legs.kalman import H, CVParams, cv_estimates, em_cv, kalman_filter, rts_smoother, transition
+from rafostrack.legs.kalman import CVParams, H, cv_estimates, em_cv, kalman_filter, rts_smoother, transition
 
 
 def _joint(times, params):
@@ -20,7 +20,9 @@ def _joint(times, params):
         prev = cov[4 * (k - 1) : 4 * k, : 4 * k]  # Cov(x_{k-1}, x_0..k-1)
         cov[4 * k : 4 * k + 4, : 4 * k] = f[k - 1] @ prev
         cov[: 4 * k, 4 * k : 4 * k + 4] = cov[4 * k : 4 * k + 4, : 4 * k].T
-        cov[4 * k : 4 * k + 4, 4 * k : 4 * k + 4] = f[k - 1] @ prev[:, 4 * (k - 1) :] @ f[k - 1].T + params.q * qt[k - 1]
+        cov[4 * k : 4 * k + 4, 4 * k : 4 * k + 4] = (
+            f[k - 1] @ prev[:, 4 * (k - 1) :] @ f[k - 1].T + params.q * qt[k - 1]
+        )
     return np.concatenate(mean), cov
 
 

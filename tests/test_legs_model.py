@@ -83,10 +83,14 @@ def test_jacobian_matches_finite_differences():
     def disp(w, a):
         return np.array([w * tau * math.cos(a), w * tau * math.sin(a)])
 
-    jac = np.column_stack([(disp(w + eps, a) - disp(w - eps, a)) / (2 * eps), (disp(w, a + eps) - disp(w, a - eps)) / (2 * eps)])
+    jac = np.column_stack(
+        [(disp(w + eps, a) - disp(w - eps, a)) / (2 * eps), (disp(w, a + eps) - disp(w, a - eps)) / (2 * eps)]
+    )
     legs = Legs.from_parameters((0, 0), 0.0, tau, [w], [a], [])
     assert -log_jacobian(legs) == pytest.approx(math.log(abs(np.linalg.det(jac))), rel=1e-6)
 
 
 def test_wrap_angle():
-    np.testing.assert_allclose(wrap_angle(np.array([math.pi, -math.pi, 3 * math.pi / 2])), [-math.pi, -math.pi, -math.pi / 2])
+    np.testing.assert_allclose(
+        wrap_angle(np.array([math.pi, -math.pi, 3 * math.pi / 2])), [-math.pi, -math.pi, -math.pi / 2]
+    )

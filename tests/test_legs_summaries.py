@@ -13,7 +13,17 @@ from rafostrack.legs.summaries import credible_band, leg_table, mean_track, pape
 
 
 def _chain(samples):
-    return Chain(tuple(samples), np.zeros(len(samples)), np.array([s.n_legs for s in samples]), samples[0], 0.0, {}, {}, 0.0)
+    return Chain(
+        tuple(samples),
+        np.zeros(len(samples)),
+        np.array([s.n_legs for s in samples]),
+        np.zeros(len(samples), dtype=int),
+        samples[0],
+        0.0,
+        {},
+        {},
+        0.0,
+    )
 
 
 def test_paper_estimate_is_the_trajectory_of_the_mean_parameters():

@@ -21,5 +21,9 @@ def test_outside_the_span_the_end_legs_are_extended():
 
 def test_velocities_and_mean_velocities():
     np.testing.assert_allclose(velocities(LEGS, np.array([1.0, 29.0])), [[1, 0], [0, 2]])
-    np.testing.assert_allclose(mean_velocities(LEGS, np.array([0.0, 5.0]), np.array([30.0, 15.0])), [[1 / 3, 4 / 3], [0.5, 1.0]])
-    np.testing.assert_array_equal(leg_index(LEGS.cuts, np.array([-1.0, 0.0, 9.99, 10.0, 30.0, 99.0])), [0, 0, 0, 1, 1, 1])
+    np.testing.assert_allclose(
+        mean_velocities(LEGS, np.array([0.0, 5.0]), np.array([30.0, 15.0])), [[1 / 3, 4 / 3], [0.5, 1.0]]
+    )
+    np.testing.assert_array_equal(
+        leg_index(LEGS.cuts, np.array([-1.0, 0.0, 9.99, 10.0, 30.0, 99.0])), [0, 0, 0, 1, 1, 1]
+    )

@@ -5,7 +5,8 @@
 2. Each window's ranked-signal log-likelihood (association summed out by the configured
    engine, exact by default) is tabulated on a grid about the smoother's position
    (`evidence`), in a plane about the mission's centre (`plane`); the launch fix and the
-   end fix (when used) are Gaussian observations.
+   end fix (when used) are Gaussian observations. The float may sit off its legs by an
+   independent N(0, s^2 I) per window (eddies shorter than a leg), s sampled too.
 3. theta_0: the paper's equal-duration legs through the smoother's positions, ranked by
    the log posterior; then Metropolis-Hastings with local knot and change-time moves,
    the paper's leg moves and reversible jump over K (`sampler`), under the `[legs]` prior.
@@ -42,7 +43,17 @@ from .scores import Measurements
 from .theta0 import data_driven_start
 from .trajectory import positions
 
-FLOAT_MOVES = {"knot": 4.0, "shift": 1.5, "jump": 2.0, "leg": 0.3, "start": 0.2}
+FLOAT_MOVES = {"knot": 4.0, "shift": 1.5, "jump": 2.0, "leg": 0.3, "start": 0.2, "level": 0.2}
+WIGGLE_LEVELS = 7  # wiggle sds between 0.5 km and [legs] wiggle_max_km, beside 0
+
+
+def wiggle_levels(max_km: float) -> tuple[float, ...]:
+    """The wiggle sds the sampler chooses among: 0, and WIGGLE_LEVELS from 0.5 km to `max_km`."""
+    if max_km <= 0:
+        return (0.0,)
+    return (0.0, *(round(float(s), 3) for s in np.geomspace(min(0.5, max_km), max_km, WIGGLE_LEVELS)))
+
+
 THETA0_GUESSES = 16
 
 
@@ -124,7 +135,7 @@ def fit_legs(loaded: LoadedFloat, output: TrackOutput, rng: np.random.Generator)
         end_day = float(elapsed_days(np.array([info.end_time]), epoch)[0])
         fixes.append((end_day, plane.to_plane(info.end_lat, info.end_lon), config.fixes.end_sd_km))
     outside_sd_km = cfg.model.toa_sigma_s * cfg.model.sound_speed_m_s / 1e3
-    evidence = float_evidence(window_days, grids, fixes, outside_sd_km)
+    evidence = float_evidence(window_days, grids, fixes, outside_sd_km, wiggle_levels(config.legs.wiggle_max_km))
     t0, t1 = min(0.0, float(evidence.times[0])), float(evidence.times[-1])
     start = _theta0(evidence, prior, window_days, centres, launch_xy, t0, t1)
     sampler = SamplerConfig(
@@ -136,7 +147,7 @@ def fit_legs(loaded: LoadedFloat, output: TrackOutput, rng: np.random.Generator)
         knot_step=3.0,
         shift_step=1.0,
         start_step=1.0,
-        max_legs=max(2, int(math.ceil((t1 - t0) / prior.duration_min))),
+        max_legs=max(2, math.ceil((t1 - t0) / prior.duration_min)),
         adapt=True,
     )
     chain = run_chain(evidence, prior, start, sampler, rng, free_start=True)
@@ -151,7 +162,7 @@ def _theta0(evidence: FloatEvidence, prior: LegPrior, window_days: NDArray, cent
     the prior's shortest and longest legs, ranked by the log posterior."""
     span = t1 - t0
     lo, hi = max(1, math.ceil(span / prior.duration_max)), max(1, math.floor(span / prior.duration_min))
-    counts = sorted({int(round(k)) for k in np.geomspace(lo, max(lo, hi), THETA0_GUESSES)})
+    counts = sorted({round(float(k)) for k in np.geomspace(lo, max(lo, hi), THETA0_GUESSES)})
     data = Measurements(np.concatenate([[0.0], window_days]), np.vstack([launch_xy[None, :], centres]))
     order = np.argsort(data.times, kind="stable")
     data = Measurements(data.times[order], data.xy[order])
@@ -160,7 +171,8 @@ def _theta0(evidence: FloatEvidence, prior: LegPrior, window_days: NDArray, cent
         lp = log_prior(legs, prior)
         if not math.isfinite(lp):
             return math.inf
-        return -(lp + float(evidence.terms(positions(legs, evidence.times), slice(0, len(evidence.times))).sum()))
+        xy = positions(legs, evidence.times)
+        return -(lp + float(evidence.terms(xy, slice(0, len(evidence.times)), level=evidence.start_level).sum()))
 
     return data_driven_start(data, prior, counts, start_time=t0, end_time=t1, objective=minus_log_posterior)
 

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 H = np.hstack([np.eye(2), np.zeros((2, 2))])
 MIN_VARIANCE = 1e-8
+EYE4 = np.eye(4)
 
 
 @dataclass(frozen=True)
@@ -83,13 +84,14 @@ def kalman_filter(times: NDArray, y: NDArray, params: CVParams) -> Filtered:
         pm[k], pc[k] = m, c
         if not np.isnan(y[k, 0]):
             s = c[:2, :2] + params.r
-            gain = np.linalg.solve(s, c[:2, :]).T  # C H^T S^-1
+            det = s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]
+            s_inv = np.array([[s[1, 1], -s[0, 1]], [-s[1, 0], s[0, 0]]]) / det  # 2x2: explicit inverse
+            gain = c[:, :2] @ s_inv  # C H^T S^-1
             resid = y[k] - m[:2]
             m = m + gain @ resid
-            ikh = np.eye(4) - gain @ H
+            ikh = EYE4 - gain @ H
             c = ikh @ c @ ikh.T + gain @ params.r @ gain.T  # Joseph form
-            sign, logdet = np.linalg.slogdet(s)
-            loglik += -0.5 * (resid @ np.linalg.solve(s, resid) + logdet + 2 * math.log(2 * math.pi))
+            loglik += -0.5 * (resid @ s_inv @ resid + math.log(det) + 2 * math.log(2 * math.pi))
         m_all[k], c_all[k] = m, c
     return Filtered(pm, pc, m_all, c_all, loglik)
 

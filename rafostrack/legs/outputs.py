@@ -4,9 +4,10 @@
   intervals (the nearest change time in each posterior sample), the mean velocity over
   the leg's span in each sample as speed (km/day) and compass heading (degrees clockwise
   from north) with 95% intervals, east/north velocity, and the leg's end points.
-- legs_track.parquet: the usual track schema (`estimates.TRACK_COLUMNS`) at each window
-  from the posterior samples (mean position, covariance ellipse, the chain's effective
-  sample size), plus the leg velocity there (posterior mean and sd, km/day).
+- legs_track.parquet: the usual track schema (`estimates.TRACK_COLUMNS`) at each window:
+  the float's posterior position (its leg's position plus its wiggle, given the window:
+  mean and covariance ellipse), the chain's effective sample size of the leg position,
+  plus the leg velocity there (posterior mean and sd, km/day).
 """
 
 from __future__ import annotations
@@ -23,10 +24,10 @@ from .. import __version__
 from ..estimates import TRACK_COLUMNS
 from ..io.writers import file_digest, write_json, write_parquet
 from ..pipeline import LoadedFloat, TrackInputs
-from .evidence import grid_loglik
+from .evidence import grid_loglik, window_positions
 from .floats import LegFit
 from .summaries import leg_table, position_samples, sample_ess
-from .trajectory import velocities
+from .trajectory import positions, velocities
 
 DAY_NS = np.timedelta64(86_400_000_000_000, "ns")
 
@@ -73,12 +74,32 @@ def legs_frame(fit: LegFit) -> pd.DataFrame:
     )
 
 
+def float_positions(fit: LegFit, max_samples: int = 200, chunk: int = 20) -> tuple[NDArray, NDArray]:
+    """Posterior mean (W, 2) and covariance (W, 2, 2) of the float's position at each window:
+    over up to `max_samples` kept samples, the conditional moments given the sample's leg
+    position and wiggle sd (`evidence.window_positions`), combined by total variance."""
+    chain, ev = fit.chain, fit.evidence
+    pick = np.unique(np.linspace(0, len(chain.samples) - 1, min(len(chain.samples), max_samples)).round().astype(int))
+    rows = np.arange(len(fit.window_days))
+    means = np.empty((len(pick), len(rows), 2))
+    covs = np.empty((len(pick), len(rows), 2, 2))
+    for lo in range(0, len(pick), chunk):
+        part = pick[lo : lo + chunk]
+        legs_xy = np.stack([positions(chain.samples[i], fit.window_days) for i in part])
+        for level in np.unique(chain.levels[part]):
+            sel = np.flatnonzero(chain.levels[part] == level)
+            m, c = window_positions(ev.grids, rows, legs_xy[sel], ev.wiggle_sd_km[level])
+            means[lo + sel], covs[lo + sel] = m, c
+    mean = means.mean(axis=0)
+    dev = means - mean
+    cov = covs.mean(axis=0) + np.einsum("swi,swj->wij", dev, dev) / max(len(pick) - 1, 1)
+    return mean, cov
+
+
 def track_frame(fit: LegFit) -> pd.DataFrame:
     days = fit.window_days
-    samples = position_samples(fit.chain, days)  # (S, W, 2)
-    mean = samples.mean(axis=0)
-    dev = samples - mean
-    cov = np.einsum("swi,swj->wij", dev, dev) / max(len(samples) - 1, 1)
+    samples = position_samples(fit.chain, days)  # (S, W, 2) leg positions
+    mean, cov = float_positions(fit)
     values, vectors = np.linalg.eigh(cov)
     values = np.clip(values, 0.0, None)
     major = vectors[:, :, 1]
@@ -131,6 +152,13 @@ def run_record(fit: LegFit, loaded: LoadedFloat, inputs: TrackInputs, total_s: f
         "kept_samples": len(fit.chain.samples),
         "acceptance": {m: round(a, 4) for m, a in fit.chain.acceptance.items()},
         "steps": {m: round(float(v), 4) for m, v in fit.chain.steps.items()},
+        "wiggle_sd_km": {
+            "levels": list(fit.evidence.wiggle_sd_km),
+            "posterior_mean": round(float(np.mean(np.array(fit.evidence.wiggle_sd_km)[fit.chain.levels])), 3),
+            "posterior_probability": [
+                round(float(np.mean(fit.chain.levels == i)), 3) for i in range(fit.evidence.n_levels)
+            ],
+        },
         "legs": {
             "map": fit.chain.best.n_legs,
             "start": fit.start.n_legs,
@@ -175,7 +203,9 @@ def plot_legs(fit: LegFit, track: pd.DataFrame, path: Path) -> Path:
         left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.1, 1.4]})
         left.plot(unwrap(smoother["lon"]), smoother["lat"], color="0.6", lw=0.8, label="particle smoother")
         left.plot(unwrap(track["lon"]), track["lat"], color="tab:blue", lw=1.2, label="legs: posterior mean")
-        left.plot(unwrap(knot_lon), knot_lat, "o", color="tab:red", ms=3, label=f"MAP knots ({fit.chain.best.n_legs} legs)")
+        left.plot(
+            unwrap(knot_lon), knot_lat, "o", color="tab:red", ms=3, label=f"MAP knots ({fit.chain.best.n_legs} legs)"
+        )
         left.set_xlabel("longitude (°)")
         left.set_ylabel("latitude (°)")
         left.set_aspect(1.0 / max(math.cos(math.radians(float(smoother["lat"].mean()))), 0.1))

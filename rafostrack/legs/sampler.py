@@ -13,6 +13,9 @@ chosen with its weight per iteration:
   two legs change, the rest of the trajectory stays. Ratio of pi_knot (model docstring).
 - `shift` (ours): move one change time, knots fixed; ratio of pi_knot.
 - `start` (ours, with a free start): translate the whole trajectory.
+- `level` (ours, for a likelihood with `n_levels` > 1): move a discrete hyperparameter of
+  the likelihood (e.g. how far a float wanders off its legs) to a neighbouring level,
+  uniform prior over the levels; every term is recomputed.
 - `jump` (ours: reversible jump over K, `rjmcmc`): split a leg at a uniform time with
   a Gaussian kink (sd: the knot step times `kink_scale`), or merge two neighbouring legs.
 
@@ -39,7 +42,8 @@ TARGET_ACCEPTANCE = 0.3
 
 
 class PointLikelihood(Protocol):
-    """Per-observation log-likelihood terms at fixed observation times."""
+    """Per-observation log-likelihood terms at fixed observation times (a likelihood with an
+    attribute `n_levels` > 1 takes `level=` too: a discrete hyperparameter the sampler moves)."""
 
     @property
     def times(self) -> NDArray[np.float64]: ...
@@ -66,7 +70,7 @@ class SamplerConfig:
     adapt: bool = False  # adapt the leg moves' steps too (never in the paper's sampler)
 
     def __post_init__(self) -> None:
-        unknown = set(self.moves) - {"leg", "knot", "shift", "start", "jump"}
+        unknown = set(self.moves) - {"leg", "knot", "shift", "start", "jump", "level"}
         if unknown or not self.moves or min(self.moves.values()) < 0:
             raise ValueError(f"bad move weights {self.moves}")
 
@@ -78,6 +82,7 @@ class Chain:
     samples: tuple[Legs, ...]
     log_posterior: NDArray[np.float64]  # log pi_leg of each kept sample (up to a constant)
     n_legs_trace: NDArray[np.int64]  # K at every iteration
+    levels: NDArray[np.int64]  # the likelihood's level at each kept sample (0 without levels)
     best: Legs  # the highest log pi_leg visited (MAP estimate)
     best_log_posterior: float
     acceptance: dict[str, float]
@@ -96,6 +101,7 @@ class _State:
     loglik: float
     logprior: float
     logjac: float
+    level: int = 0
 
     def target(self, coords: str) -> float:
         return self.loglik + self.logprior + (self.logjac if coords == "knot" else 0.0)
@@ -120,8 +126,14 @@ def run_chain(
     started = time.perf_counter()
     times = likelihood.times
     legs = repair_start(start, prior)
-    terms = likelihood.terms(positions(legs, times), slice(0, len(times)))
-    state = _State(legs, terms, float(terms.sum()), log_prior(legs, prior), log_jacobian(legs))
+    n_levels = int(getattr(likelihood, "n_levels", 1))
+    level = int(getattr(likelihood, "start_level", 0))
+
+    def terms_at(xy: NDArray, index: slice, at: int) -> NDArray[np.float64]:
+        return likelihood.terms(xy, index, level=at) if n_levels > 1 else likelihood.terms(xy, index)  # type: ignore[call-arg]
+
+    terms = terms_at(positions(legs, times), slice(0, len(times)), level)
+    state = _State(legs, terms, float(terms.sum()), log_prior(legs, prior), log_jacobian(legs), level)
     if not math.isfinite(state.logprior + state.loglik):
         raise ValueError("the starting trajectory has zero posterior density")
     steps = {
@@ -132,7 +144,11 @@ def run_chain(
         "start": config.start_step,
     }
     adaptive = {"knot", "shift", "start"} | ({"speed", "heading"} if config.adapt else set())
-    names = [m for m, w in config.moves.items() if w > 0 and not (m == "start" and not free_start)]
+    names = [
+        m
+        for m, w in config.moves.items()
+        if w > 0 and not (m == "start" and not free_start) and not (m == "level" and n_levels < 2)
+    ]
     weights = np.array([config.moves[m] for m in names], dtype=float)
     weights /= weights.sum()
     tried = dict.fromkeys(names, 0)
@@ -141,21 +157,26 @@ def run_chain(
     thin = max(1, math.ceil((config.iterations - burn) / config.max_kept))
     kept: list[Legs] = []
     kept_lp: list[float] = []
+    kept_level: list[int] = []
     trace = np.empty(config.iterations, dtype=np.int64)
     best, best_lp = state.legs, state.target("leg")
     choices = rng.choice(len(names), size=config.iterations, p=weights)
     for it in range(config.iterations):
         name = names[choices[it]]
-        proposal, step_key = _propose(name, state.legs, rng, steps, config, prior, free_start)
         ok = False
+        if name == "level":
+            state, ok = _level_move(state, n_levels, terms_at, times, rng)
+            proposal, step_key = None, "level"
+        else:
+            proposal, step_key = _propose(name, state.legs, rng, steps, config, prior, free_start)
         if proposal is not None:
             new, log_q, coords, a, b = proposal
             lp = log_prior(new, prior)
             if lp > -math.inf:
                 lo, hi = np.searchsorted(times, a, "left"), np.searchsorted(times, b, "right")
-                new_terms = likelihood.terms(positions(new, times[lo:hi]), slice(lo, hi))
+                new_terms = terms_at(positions(new, times[lo:hi]), slice(lo, hi), state.level)
                 loglik = state.loglik - float(state.terms[lo:hi].sum()) + float(new_terms.sum())
-                cand = _State(new, state.terms, loglik, lp, log_jacobian(new) if coords == "knot" else 0.0)
+                cand = _State(new, state.terms, loglik, lp, log_jacobian(new) if coords == "knot" else 0.0, state.level)
                 if coords == "knot":
                     log_ratio = cand.target("knot") - state.target("knot") + log_q
                 else:
@@ -163,7 +184,7 @@ def run_chain(
                 if math.isfinite(log_ratio) and math.log(rng.random()) < log_ratio:
                     terms = state.terms.copy()
                     terms[lo:hi] = new_terms
-                    state = _State(new, terms, float(terms.sum()), lp, log_jacobian(new))
+                    state = _State(new, terms, float(terms.sum()), lp, log_jacobian(new), state.level)
                     ok = True
                     if state.target("leg") > best_lp:
                         best, best_lp = state.legs, state.target("leg")
@@ -175,16 +196,36 @@ def run_chain(
         if it >= burn and (it - burn) % thin == 0:
             kept.append(state.legs)
             kept_lp.append(state.target("leg"))
+            kept_level.append(state.level)
     return Chain(
         samples=tuple(kept),
         log_posterior=np.array(kept_lp),
         n_legs_trace=trace,
+        levels=np.array(kept_level, dtype=np.int64),
         best=best,
         best_log_posterior=best_lp,
         acceptance={m: accepted[m] / max(tried[m], 1) for m in names},
         steps=steps,
         seconds=time.perf_counter() - started,
     )
+
+
+def _level_move(
+    state: _State, n_levels: int, terms_at: Callable[[NDArray, slice, int], NDArray], times: NDArray,
+    rng: np.random.Generator,
+) -> tuple[_State, bool]:  # fmt: skip
+    """Move the likelihood's level to a neighbour (uniform among the 1 or 2 there are);
+    uniform prior, Hastings ratio = neighbours(l) / neighbours(l')."""
+    lv = state.level
+    options = [x for x in (lv - 1, lv + 1) if 0 <= x < n_levels]
+    new = options[int(rng.integers(len(options)))]
+    back = sum(1 for x in (new - 1, new + 1) if 0 <= x < n_levels)
+    terms = terms_at(positions(state.legs, times), slice(0, len(times)), new)
+    loglik = float(terms.sum())
+    log_ratio = loglik - state.loglik + math.log(len(options) / back)
+    if math.isfinite(log_ratio) and math.log(rng.random()) < log_ratio:
+        return _State(state.legs, terms, loglik, state.logprior, state.logjac, new), True
+    return state, False
 
 
 def repair_start(legs: Legs, prior: LegPrior) -> Legs:

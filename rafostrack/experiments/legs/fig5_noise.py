@@ -15,7 +15,7 @@ from .sweep import Sizes, sweep_experiment
 NAME = "fig5_noise"
 LEVELS = (0.0, 400.0, 800.0, 1200.0, 1600.0)
 METHODS = ("rw_paper", "rw_paper_var", "rw_ours", "kf", "ks")
-FULL = Sizes(repeats=14, iterations=5000)
+FULL = Sizes(repeats=10, iterations=5000)
 QUICK = Sizes(repeats=2, iterations=1500)
 SEED = 500
 

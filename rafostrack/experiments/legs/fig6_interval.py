@@ -15,7 +15,7 @@ from .sweep import Sizes, sweep_experiment
 NAME = "fig6_interval"
 LEVELS = (1.0, 5.0, 10.0, 15.0, 20.0)
 METHODS = ("rw_paper", "rw_ours", "kf", "ks")
-FULL = Sizes(repeats=14, iterations=5000)
+FULL = Sizes(repeats=10, iterations=5000)
 QUICK = Sizes(repeats=2, iterations=1500)
 SEED = 600
 

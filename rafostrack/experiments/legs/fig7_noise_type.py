@@ -16,7 +16,7 @@ from .target import NOISE_TYPES, Scenario
 NAME = "fig7_noise_type"
 BASE = Scenario(sigma2=25.0)
 METHODS = ("rw_paper", "rw_ours", "rw_student", "kf", "ks")
-FULL = Sizes(repeats=14, iterations=5000)
+FULL = Sizes(repeats=10, iterations=5000)
 QUICK = Sizes(repeats=2, iterations=1500)
 SEED = 700
 

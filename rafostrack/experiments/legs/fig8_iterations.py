@@ -32,7 +32,7 @@ class Sizes:
     iterations: tuple[int, ...]
 
 
-FULL = Sizes(repeats=8, iterations=(500, 1000, 2500, 5000, 10000, 20000))
+FULL = Sizes(repeats=6, iterations=(500, 1000, 2500, 5000, 10000, 20000))
 QUICK = Sizes(repeats=2, iterations=(250, 1000, 3000))
 SEED = 800
 
@@ -87,7 +87,9 @@ def _draw(path: Path, table: list[dict[str, Any]], kf_mean: float, sz: Sizes) ->
             mean = np.array([r[f"{m}_mean"] for r in table])
             se = np.nan_to_num(np.array([r[f"{m}_se"] for r in table]))
             ax.errorbar(n, mean, yerr=se, color=color, marker=marker, lw=1.4, capsize=3, label=f"{LABELS[m]}: error")
-            right.plot(n, [r[f"{m}_seconds"] for r in table], color=color, ls=":", marker=".", label=f"{LABELS[m]}: time")
+            right.plot(
+                n, [r[f"{m}_seconds"] for r in table], color=color, ls=":", marker=".", label=f"{LABELS[m]}: time"
+            )
         ax.axhline(kf_mean, color=STYLE["kf"][0], ls="--", lw=1, label=f"{LABELS['kf']}: error")
         ax.set_xscale("log")
         ax.set_xlabel("MCMC iterations N")

@@ -80,9 +80,7 @@ def rw_ours(run: Run, iterations: int, rng: np.random.Generator, student: bool =
     return mean_track(chain, run.eval_t)
 
 
-def run_methods(
-    run: Run, iterations: int, seed: list[int], methods: tuple[str, ...] = METHODS
-) -> list[dict[str, Any]]:
+def run_methods(run: Run, iterations: int, seed: list[int], methods: tuple[str, ...] = METHODS) -> list[dict[str, Any]]:
     """SS, SS / T and seconds of every method on one run (each sampler its own seeded stream)."""
     rows = []
     kalman: tuple[np.ndarray, np.ndarray] | None = None

@@ -32,6 +32,9 @@ STYLE = {
 }
 
 
+DEFAULTS = Scenario()  # the paper's default settings
+
+
 @dataclass(frozen=True)
 class Sizes:
     repeats: int
@@ -48,7 +51,7 @@ def _task(task: tuple[Scenario, str, int, Any, int, int, int, tuple[str, ...]]) 
 
 def run_sweep(
     factor: str, levels: tuple[Any, ...], methods: tuple[str, ...], sz: Sizes, seed: int,
-    workers: int = DEFAULT_WORKERS, base: Scenario = Scenario(),
+    workers: int = DEFAULT_WORKERS, base: Scenario = DEFAULTS,
 ) -> pd.DataFrame:  # fmt: skip
     """Every method on R repeats at every level; one row per (level, repeat, method)."""
     tasks = [
@@ -108,7 +111,7 @@ def draw(path: Path, table: list[dict[str, Any]], methods: tuple[str, ...], xlab
 
 def sweep_experiment(
     outdir: Path, name: str, title: str, factor: str, levels: tuple[Any, ...], methods: tuple[str, ...], sz: Sizes,
-    seed: int, workers: int, xlabel: str, categorical: bool = False, base: Scenario = Scenario(),
+    seed: int, workers: int, xlabel: str, categorical: bool = False, base: Scenario = DEFAULTS,
 ) -> dict[str, Any]:  # fmt: skip
     """Run the sweep, write `<name>.png`, `<name>.csv` (per level) and `<name>_repeats.csv`; the summary."""
     raw = run_sweep(factor, levels, methods, sz, seed, workers, base)
@@ -116,8 +119,8 @@ def sweep_experiment(
     files = [f"{name}.png", f"{name}.csv", f"{name}_repeats.csv"]
     save_csv(pd.DataFrame(table), outdir / files[1])
     save_csv(raw, outdir / files[2])
-    draw(outdir / files[0], table, methods, xlabel,
-         f"{title}: mean ± 1 SE over {sz.repeats} paired repeats, {sz.iterations} MCMC iterations", categorical)  # fmt: skip
+    heading = f"{title}: mean ± 1 SE over {sz.repeats} paired repeats, {sz.iterations} MCMC iterations"
+    draw(outdir / files[0], table, methods, xlabel, heading, categorical)
     return {
         "name": name,
         "title": title,

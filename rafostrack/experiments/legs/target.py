@@ -63,9 +63,11 @@ class Run:
         return np.column_stack([np.interp(times, self.truth_t, self.truth_xy[:, k]) for k in range(2)])
 
 
-def simulate_target(total_s: float, rng: np.random.Generator, cfg: TargetConfig = TargetConfig()) -> tuple[NDArray, NDArray]:
+def simulate_target(
+    total_s: float, rng: np.random.Generator, cfg: TargetConfig = TargetConfig()
+) -> tuple[NDArray, NDArray]:
     """Times (every STEP_S) and positions of one target track (module docstring)."""
-    n = int(math.ceil(total_s / STEP_S)) + 1
+    n = math.ceil(total_s / STEP_S) + 1
     xy = np.zeros((n, 2))
     heading = rng.uniform(-math.pi, math.pi)
     speed = rng.uniform(*cfg.speed)
