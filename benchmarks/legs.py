@@ -14,6 +14,10 @@ default settings and then fitted with legs (`rafostrack.legs.floats.legs_float`,
 - run time (s): the smoother, and the leg fit after it (grids + sampler).
 
     nice -n 10 python benchmarks/legs.py [--per-group 1] [--days 240] [--seed 2026] [--out DIR] [--csv FILE]
+    OMP_NUM_THREADS=1 taskset -c 0 python benchmarks/legs.py --sample-float   # the 2-year float's timing
+
+`--sample-float` instead times the 2-year sample float (float767, 729 windows): the
+smoother, then the leg fit (grids + sampler), on whatever cores it is given.
 """
 
 from __future__ import annotations
@@ -108,6 +112,19 @@ def score(float_file: Path, out_root: Path) -> dict[str, Any]:
     }
 
 
+SAMPLE_FLOAT = Path(__file__).parents[1] / "rafostrack" / "data" / "samples" / "float767.csv"
+
+
+def time_sample_float(out: Path) -> None:
+    result = legs_float(TrackInputs(SAMPLE_FLOAT), out, plots=False)
+    t = result.fit.timings
+    print(
+        f"{result.float_id}: {result.run['windows']} windows, {result.fit.chain.best.n_legs} legs; smoother "
+        f"{t['smoother_s']:.1f} s, leg fit {t['fit_s']:.1f} s (grids {t['grids_s']:.1f} s, sampler "
+        f"{t['sampler_s']:.1f} s, {result.run['iterations']} iterations); total {result.run['runtime_s']:.1f} s"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--per-group", type=int, default=1, help="floats per (geometry, clutter) group")
@@ -115,8 +132,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--out", type=Path, help="keep the missions and outputs here")
     parser.add_argument("--csv", type=Path, help="write the per-float table here")
+    parser.add_argument("--sample-float", action="store_true", help="time the 2-year sample float instead")
     args = parser.parse_args()
     root = args.out or Path(tempfile.mkdtemp(prefix="rafostrack-legs-"))
+    if args.sample_float:
+        time_sample_float(root)
+        return
     files = make_missions(root / "missions", 6 * FLOATS_PER_GROUP_IN_ROBUSTNESS, args.days, args.seed)
     chosen = [f for k, f in enumerate(files) if k % FLOATS_PER_GROUP_IN_ROBUSTNESS < args.per_group]
     print(f"floats: {', '.join(f.stem for f in chosen)} (robustness set, seed {args.seed}, {args.days} days)")

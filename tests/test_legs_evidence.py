@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 
 from rafostrack.domain import Window
-from rafostrack.legs.evidence import FIX, WINDOW, build_grids, float_evidence, grid_loglik
+from rafostrack.legs.evidence import (
+    FIX,
+    WINDOW,
+    Grids,
+    build_grids,
+    float_evidence,
+    grid_loglik,
+    smooth_grids,
+    window_positions,
+)
 from rafostrack.legs.plane import Plane
 from rafostrack.likelihoods import Evidence
 
@@ -71,3 +80,36 @@ def test_float_evidence_orders_windows_and_fixes():
     assert terms[3] == pytest.approx(-0.5 - np.log(2 * np.pi))
     np.testing.assert_allclose(terms[1:3], [0.0, -0.125], atol=1e-6)  # the second sits between nodes
     np.testing.assert_allclose(ev.terms(xy[1:3], slice(1, 3)), terms[1:3])
+
+
+def _gaussian_grid(centre, peak, sd, spacing=0.5, half=40):
+    """A grid holding log N(x; peak, sd^2 I) about `centre`."""
+    offsets = spacing * np.arange(-half, half + 1)
+    de, dn = np.meshgrid(offsets, offsets, indexing="ij")
+    values = -0.5 * ((centre[0] + de - peak[0]) ** 2 + (centre[1] + dn - peak[1]) ** 2) / sd**2
+    return Grids(np.array([centre], dtype=float), spacing, values[None])
+
+
+def test_smoothing_convolves_with_the_wiggle():
+    """N(x; p, a^2) convolved with N(0, s^2): a Gaussian of variance a^2 + s^2 (up to a constant)."""
+    grids = _gaussian_grid(np.array([0.0, 0.0]), np.array([1.0, -2.0]), 2.0)
+    smooth = smooth_grids(grids, 3.0)
+    z = np.array([[4.0, 1.0], [-3.0, -2.0], [1.0, -2.0]])
+    got = grid_loglik(smooth, np.zeros(3, dtype=np.intp), z, 3.0)
+    want = -0.5 * ((z - [1.0, -2.0]) ** 2).sum(axis=1) / 13.0
+    np.testing.assert_allclose(got - got[2], want - want[2], atol=2e-3)
+    assert smooth_grids(grids, 0.0) is grids
+
+
+def test_position_given_the_leg_is_the_product_of_gaussians():
+    """p(x | z) ~ N(x; p, a^2) N(x; z, s^2): mean (s^2 p + a^2 z) / (a^2 + s^2), variance a^2 s^2 / (a^2 + s^2)."""
+    grids = _gaussian_grid(np.array([0.0, 0.0]), np.array([1.0, -2.0]), 2.0)
+    z = np.array([[[3.0, 0.0]], [[0.0, -5.0]]])  # two samples, one window
+    mean, cov = window_positions(grids, np.array([0]), z, 1.5)
+    a2, s2 = 4.0, 2.25
+    want = (s2 * np.array([1.0, -2.0]) + a2 * z[:, 0]) / (a2 + s2)
+    np.testing.assert_allclose(mean[:, 0], want, atol=1e-3)
+    np.testing.assert_allclose(cov[:, 0], np.broadcast_to(a2 * s2 / (a2 + s2) * np.eye(2), (2, 2, 2)), atol=1e-3)
+    same, none = window_positions(grids, np.array([0]), z, 0.0)
+    np.testing.assert_array_equal(same, z)
+    np.testing.assert_array_equal(none, 0.0)

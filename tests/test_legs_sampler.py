@@ -88,3 +88,25 @@ def test_a_zero_length_leg_is_repaired_before_sampling():
     assert np.all(np.hypot(*fixed.displacements.T) > 0)
     with pytest.raises(ValueError):
         SamplerConfig(moves={"teleport": 1.0})
+
+
+class Levels:
+    """A likelihood with three levels whose terms do not depend on the trajectory: the level's
+    posterior is prop. to exp(n_obs * c_level)."""
+
+    times = np.array([1.0, 2.0, 3.0, 4.0])
+    n_levels = 3
+    start_level = 0
+    offsets = np.array([0.0, 0.5, 0.25])
+
+    def terms(self, xy, index, level=0):
+        return np.full(len(xy), self.offsets[level])
+
+
+def test_level_move_samples_the_levels_posterior():
+    start = Legs(np.array([0.0, 4.0]), np.array([[0.0, 0.0], [8.0, 0.0]]))
+    config = SamplerConfig(iterations=12000, moves={"level": 1.0}, max_kept=12000)
+    chain = run_chain(Levels(), PRIOR, start, config, np.random.default_rng(4), free_start=False)
+    want = np.exp(4 * Levels.offsets)
+    want /= want.sum()
+    np.testing.assert_allclose(np.bincount(chain.levels, minlength=3) / len(chain.levels), want, atol=0.03)

@@ -125,7 +125,8 @@ def run_chain(
     """Run the sampler from `start` (module docstring)."""
     started = time.perf_counter()
     times = likelihood.times
-    legs = repair_start(start, prior)
+    knot_moves = any(config.moves.get(m, 0) > 0 for m in ("knot", "shift", "jump"))
+    legs = repair_start(start, prior) if knot_moves else start  # leg coordinates have no 1/|d| pole
     n_levels = int(getattr(likelihood, "n_levels", 1))
     level = int(getattr(likelihood, "start_level", 0))
 
@@ -228,9 +229,13 @@ def _level_move(
     return state, False
 
 
+REPAIR_FRACTION = 1e-3
+
+
 def repair_start(legs: Legs, prior: LegPrior) -> Legs:
-    """`legs` with any zero-length leg given the prior's mean speed along the previous
-    heading (a start at zero displacement sits on the knot density's 1/|d| pole)."""
+    """`legs` with any zero-length leg (a start on the knot density's 1/|d| pole) given a
+    tiny displacement, REPAIR_FRACTION of the prior's mean speed times its duration, along
+    the previous heading; the trajectory barely moves."""
     d = legs.displacements.copy()
     length = legs.lengths
     if np.all(length > 0):
@@ -240,7 +245,7 @@ def repair_start(legs: Legs, prior: LegPrior) -> Legs:
         if length[i] > 0:
             heading = math.atan2(d[i, 1], d[i, 0])
         else:
-            speed = max(prior.speed_mean, prior.speed_sd)
+            speed = REPAIR_FRACTION * max(prior.speed_mean, prior.speed_sd)
             d[i] = speed * legs.durations[i] * np.array([math.cos(heading), math.sin(heading)])
     knots = legs.knots[0] + np.vstack([[0.0, 0.0], np.cumsum(d, axis=0)])
     return Legs(legs.cuts.copy(), knots)

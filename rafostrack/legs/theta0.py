@@ -2,7 +2,7 @@
 
 For each guess k of the number of legs (paper: k in {5, 10, ..., 50}): k legs of equal
 duration T / k; each leg's heading and speed from the two measurements nearest in time to
-its start and its end,
+its start and its end (ties between guesses go to the fewer legs),
     a_i = atan2(y_k - y_j),  w_i = |y_k - y_j| / t_i,
 the legs chained from the measurement nearest the start time. Keep the k whose trajectory
 scores best (the paper's summed distance by default). Guesses whose equal durations lie
@@ -60,7 +60,7 @@ def data_driven_start(
     for k in valid:
         legs = equal_legs(data, k, t0, t1)
         s = objective(legs) if objective is not None else score(positions(legs, data.times), data.xy)
-        if best is None or s < best[0]:
+        if best is None or s < best[0] - 1e-9 * (1.0 + abs(best[0])):  # near-ties: the fewer legs
             best = (s, legs)
     assert best is not None
     return best[1]

@@ -7,7 +7,8 @@
   mean parameters;
 - `rw_paper_var`: the same with sigma2 = the measurement variance (floored at 1), the
   other reading of "the covariance matrix associated with the measurements" (section 5);
-- `rw_ours`: the same prior and theta_0, with a Gaussian likelihood (sd given, floored at
+- `rw_ours`: the same prior, theta_0 over every k in 1..50 (the paper's multiples of 5 can
+  only misalign legs with the measurements when T / dT is not one), a Gaussian likelihood (sd given, floored at
   1; Student-t with 4 dof and the same variance as `rw_student`), our knot, shift and
   start moves beside the paper's, reversible jump over K, and the pointwise posterior
   mean as the estimate;
@@ -35,6 +36,7 @@ from ...legs.trajectory import positions
 from .target import Run
 
 PRIOR = LegPrior()  # the paper's
+OUR_LEG_COUNTS = tuple(range(1, 51))  # every k up to 50, not only multiples of 5
 OUR_MOVES = {"leg": 1.0, "knot": 2.0, "shift": 1.0, "start": 0.5, "jump": 1.0}
 MIN_SIGMA2 = 1.0
 TOOLBOX_SIGMA2 = 1.0  # the MCMC toolbox's default `sigma2`
@@ -69,7 +71,7 @@ def rw_paper(run: Run, iterations: int, rng: np.random.Generator, given_variance
 
 def rw_ours(run: Run, iterations: int, rng: np.random.Generator, student: bool = False) -> np.ndarray:
     data = Measurements(run.meas_t, run.meas_xy)
-    start = data_driven_start(data, PRIOR)
+    start = data_driven_start(data, PRIOR, OUR_LEG_COUNTS)
     sd = math.sqrt(max(run.scenario.sigma2, MIN_SIGMA2))
     if student:
         likelihood: Any = StudentLikelihood(data, sd * math.sqrt((STUDENT_DOF - 2) / STUDENT_DOF), STUDENT_DOF)
