@@ -1,7 +1,8 @@
 """`rafostrack legs FLOAT.csv`: a leg model fitted to a float's arrival times.
 
 1. The particle smoother (`method.track_record`) tracks the float as `rafostrack track`
-   does; its calibrated model values (sound speed, TOA noise, clutter, ...) are used.
+   does; its calibration (sound speed, per-beacon corrections, the float's clock residual,
+   TOA noise, clutter, ...) is used (`calibrated_inputs`).
 2. Each window's ranked-signal log-likelihood (association summed out by the configured
    engine, exact by default) is tabulated on a grid about the smoother's position
    (`evidence`), in a plane about the mission's centre (`plane`); the launch fix and the
@@ -28,11 +29,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..calibrate import calibrate
 from ..config import Config, with_overrides
-from ..domain import Window, elapsed_days
+from ..domain import BeaconTable, FloatInfo, Window, elapsed_days
 from ..errors import InputError
 from ..likelihoods import arrivals_from_config
-from ..method import track_record
+from ..method import profile_sound_speed, track_record
 from ..pipeline import LoadedFloat, TrackInputs, load_float
 from ..tracker import TrackOutput
 from .evidence import FloatEvidence, build_grids, float_evidence
@@ -89,6 +91,30 @@ def calibrated_config(config: Config, output: TrackOutput) -> Config:
     return with_overrides(config, model=model) if model else config
 
 
+def calibrated_inputs(loaded: LoadedFloat, output: TrackOutput) -> tuple[BeaconTable, FloatInfo, Config]:
+    """The beacon table, float and configuration the smoother tracked with after calibration
+    (per-beacon offset, drift and sound-speed corrections, the float's clock residual, the
+    model values), for the windows' likelihood.
+
+    `method.track_record` does not return them, so they are recomputed here with its public
+    steps, `method.profile_sound_speed` then `calibrate.calibrate` (seeded from the config:
+    the same values the smoother used). Where the sound speed was set by the user the
+    first pass is private to `method`, and only the reported model values are applied
+    (`calibrated_config`). Without calibration: the inputs as loaded."""
+    config = loaded.config
+    if not config.calibrate.enabled or output.calibration is None:
+        return loaded.beacons, loaded.info, config
+    if ("model", "sound_speed_m_s") in loaded.explicit:
+        return loaded.beacons, loaded.info, calibrated_config(config, output)
+    speed, _, first_pass = profile_sound_speed(config, loaded.beacons, loaded.info, loaded.record)
+    profiled = with_overrides(config, model={"sound_speed_m_s": speed})
+    keep = set(loaded.explicit) | {("model", "sound_speed_m_s")}
+    calibration = calibrate(first_pass, loaded.record, loaded.beacons, loaded.info, profiled, keep)
+    if calibration is None:
+        return loaded.beacons, loaded.info, calibrated_config(config, output)
+    return calibration.beacons, calibration.info, calibration.apply(profiled)
+
+
 def leg_prior(config: Config) -> LegPrior:
     c = config.legs
     if c.duration_min_days >= c.duration_max_days:
@@ -111,8 +137,15 @@ def _centre(lat: NDArray, lon: NDArray) -> Plane:
     return Plane(float(np.mean(lat)), float((np.mean(unwrapped) + 180.0) % 360.0 - 180.0))
 
 
-def fit_legs(loaded: LoadedFloat, output: TrackOutput, rng: np.random.Generator) -> LegFit:
-    """Steps 2-3 of the module docstring, from the smoother's `output`."""
+def fit_legs(
+    loaded: LoadedFloat,
+    output: TrackOutput,
+    rng: np.random.Generator,
+    model_inputs: tuple[BeaconTable, FloatInfo, Config] | None = None,
+) -> LegFit:
+    """Steps 2-3 of the module docstring, from the smoother's `output`; the windows'
+    likelihood uses `model_inputs` (beacons, float, config; default: the loaded ones with
+    the calibrated model values)."""
     config, info, record = loaded.config, loaded.info, loaded.record
     if not record.windows:
         raise InputError(f"{record.path}: no listening windows to fit legs to")
@@ -124,8 +157,8 @@ def fit_legs(loaded: LoadedFloat, output: TrackOutput, rng: np.random.Generator)
     times = np.array([w.time for w in record.windows], dtype="datetime64[ns]")
     window_days = elapsed_days(times, epoch)
     centres = plane.to_plane(track["lat"].to_numpy(), track["lon"].to_numpy())
-    cfg = calibrated_config(config, output)
-    likelihood = arrivals_from_config(loaded.beacons, info, cfg)
+    beacons, model_info, cfg = model_inputs or (loaded.beacons, info, calibrated_config(config, output))
+    likelihood = arrivals_from_config(beacons, model_info, cfg)
     grids = build_grids(likelihood, list(record.windows), centres, plane, config.legs.grid_spacing_km,
                         config.legs.grid_half_width_km)  # fmt: skip
     grids_s = time.perf_counter() - started
@@ -199,8 +232,10 @@ def legs_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True) -> Le
     leg_prior(loaded.config)  # a bad [legs] prior fails before the smoother runs
     output = track_record(loaded.beacons, loaded.info, loaded.config, loaded.record, explicit=loaded.explicit)
     smoother_s = time.perf_counter() - started
-    fit = fit_legs(loaded, output, float_seed(loaded.config, loaded.info.float_id))
-    fit = dataclasses.replace(fit, timings={"smoother_s": smoother_s, **fit.timings})
+    model_inputs = calibrated_inputs(loaded, output)
+    calibration_s = time.perf_counter() - started - smoother_s
+    fit = fit_legs(loaded, output, float_seed(loaded.config, loaded.info.float_id), model_inputs)
+    fit = dataclasses.replace(fit, timings={"smoother_s": smoother_s, "calibration_s": calibration_s, **fit.timings})
     out_dir = Path(out_root) / loaded.info.float_id
     run = write_outputs(fit, loaded, inputs, out_dir, plots=plots, total_s=time.perf_counter() - started)
     return LegsResult(loaded.info.float_id, out_dir, fit, run)
