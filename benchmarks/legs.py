@@ -8,9 +8,11 @@ default settings and then fitted with legs (`rafostrack.legs.floats.legs_float`,
 
 - position RMSE (km) at the windows of the smoother and of the legs (posterior mean);
 - velocity RMSE (km/day) against the true mean velocity over each day between two
-  consecutive daily windows: the smoother's finite difference of its positions, and the
-  legs' posterior mean of the same day's mean velocity;
-- 95% coverage: of positions (ellipses) for both, of those daily velocities for the legs;
+  windows a day apart (and over 5 days: `vel5_*`): the smoother's finite difference of its
+  positions, and the legs' posterior mean of the same span's mean velocity;
+- 95% coverage: of positions (ellipses) for both; of the daily velocities for the legs,
+  from the posterior of the leg velocity plus the model's wiggle (the float's departures
+  from its legs, N(0, s^2) per window, add 2 s^2 / dt^2 to the variance of a velocity);
 - run time (s): the smoother, the recomputation of its calibration (`calibrated_inputs`:
   `track_record` does not return it), and the leg fit after them (grids + sampler).
 
@@ -53,12 +55,15 @@ def _truth(float_file: Path) -> pd.DataFrame:
     return truth
 
 
-def daily_pairs(track_times: pd.Series, truth: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-    """Indices (into `truth`) of consecutive true positions one day apart, both at windows."""
-    at_window = truth["time"].isin(set(pd.to_datetime(track_times)))
-    dt = truth["time"].diff().dt.total_seconds().to_numpy() / 86400.0
-    ok = np.flatnonzero((np.abs(dt - 1.0) < 0.01) & at_window.to_numpy() & np.roll(at_window.to_numpy(), 1))
-    return ok - 1, ok
+def pairs(track_times: pd.Series, truth: pd.DataFrame, days: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (into `truth`) of true positions `days` apart, both at windows."""
+    times = truth["time"].to_numpy()
+    at_window = truth["time"].isin(set(pd.to_datetime(track_times))).to_numpy()
+    later = np.searchsorted(times, times + np.timedelta64(days, "D"))
+    ok = (later < len(times)) & at_window
+    ok[ok] &= (times[later[ok]] == times[ok] + np.timedelta64(days, "D")) & at_window[later[ok]]
+    first = np.flatnonzero(ok)
+    return first, later[first]
 
 
 def velocity_of(frame: pd.DataFrame, a: np.ndarray, b: np.ndarray, days: np.ndarray) -> np.ndarray:
@@ -78,35 +83,43 @@ def score(float_file: Path, out_root: Path) -> dict[str, Any]:
     legs_track = pd.read_parquet(result.out_dir / "legs_track.parquet")
     legs_track["time"] = legs_track["time"].dt.tz_localize(None)
     err_s, err_l = position_errors_km(smoother, truth), position_errors_km(legs_track, truth)
-    a, b = daily_pairs(smoother["time"], truth)
-    days = (truth["time"].iloc[b].to_numpy() - truth["time"].iloc[a].to_numpy()) / np.timedelta64(1, "D")
-    v_true = velocity_of(truth, a, b, days)
     by_time = smoother.set_index(pd.to_datetime(smoother["time"]))[["lat", "lon"]]
-    s_a = by_time.loc[truth["time"].iloc[a]].reset_index(drop=True)
-    s_b = by_time.loc[truth["time"].iloc[b]].reset_index(drop=True)
-    both = pd.concat([s_a, s_b], ignore_index=True)
-    v_smooth = velocity_of(both, np.arange(len(a)), np.arange(len(a)) + len(a), days)
-    start_days = (truth["time"].iloc[a].to_numpy() - fit.epoch) / np.timedelta64(1, "D")
-    samples = velocity_samples(fit.chain, start_days, start_days + days)  # (S, n, 2), plane km/day
-    v_legs = samples.mean(axis=0)
-    dev = samples - v_legs
-    cov = np.einsum("sni,snj->nij", dev, dev) / max(len(samples) - 1, 1) + 1e-9 * np.eye(2)
-    resid = v_true - v_legs
-    maha = np.einsum("ni,nij,nj->n", resid, np.linalg.inv(cov), resid)
+    wiggle2 = float(np.mean(np.square(np.array(fit.evidence.wiggle_sd_km)[fit.chain.levels])))
     rmse = lambda e: float(np.sqrt(np.mean(np.sum(np.atleast_2d(e) ** 2, axis=-1))))  # noqa: E731
+    vel: dict[int, dict[str, Any]] = {}
+    for span in (1, 5):
+        a, b = pairs(smoother["time"], truth, span)
+        days = np.full(len(a), float(span))
+        v_true = velocity_of(truth, a, b, days)
+        both = pd.concat([by_time.loc[truth["time"].iloc[a]], by_time.loc[truth["time"].iloc[b]]], ignore_index=True)
+        v_smooth = velocity_of(both, np.arange(len(a)), np.arange(len(a)) + len(a), days)
+        start_days = (truth["time"].iloc[a].to_numpy() - fit.epoch) / np.timedelta64(1, "D")
+        samples = velocity_samples(fit.chain, start_days, start_days + days)  # (S, n, 2), plane km/day
+        v_legs = samples.mean(axis=0)
+        dev = samples - v_legs
+        cov = np.einsum("sni,snj->nij", dev, dev) / max(len(samples) - 1, 1)
+        cov = cov + (2 * wiggle2 / span**2 + 1e-9) * np.eye(2)
+        resid = v_true - v_legs
+        maha = np.einsum("ni,nij,nj->n", resid, np.linalg.inv(cov), resid)
+        vel[span] = {"smooth": rmse(v_smooth - v_true), "legs": rmse(v_legs - v_true), "true": rmse(v_true),
+                     "cover": float(np.mean(maha <= chi2.ppf(0.95, 2))), "n": len(a)}  # fmt: skip
     return {
         "float": float_file.stem,
         "windows": len(smoother),
         "legs_map": fit.chain.best.n_legs,
         "pos_rmse_smoother_km": float(np.sqrt(np.mean(err_s**2))),
         "pos_rmse_legs_km": float(np.sqrt(np.mean(err_l**2))),
-        "vel_rmse_smoother_fd": rmse(v_smooth - v_true),
-        "vel_rmse_legs": rmse(v_legs - v_true),
-        "true_speed_rms": rmse(v_true),
+        "vel_rmse_smoother_fd": vel[1]["smooth"],
+        "vel_rmse_legs": vel[1]["legs"],
+        "true_speed_rms": vel[1]["true"],
+        "vel5_rmse_smoother_fd": vel[5]["smooth"],
+        "vel5_rmse_legs": vel[5]["legs"],
         "cover95_smoother": float(np.mean(inside_ellipse(smoother, truth, ELLIPSE_95_SCALE))),
         "cover95_legs": float(np.mean(inside_ellipse(legs_track, truth, ELLIPSE_95_SCALE))),
-        "vel_cover95_legs": float(np.mean(maha <= chi2.ppf(0.95, 2))),
-        "days_scored": len(a),
+        "vel_cover95_legs": vel[1]["cover"],
+        "vel5_cover95_legs": vel[5]["cover"],
+        "wiggle_km": float(np.sqrt(wiggle2)),
+        "days_scored": vel[1]["n"],
         "smoother_s": fit.timings["smoother_s"],
         "calibration_s": fit.timings["calibration_s"],
         "legs_fit_s": fit.timings["fit_s"],
@@ -151,8 +164,9 @@ def main() -> None:
     means = table.drop(columns=["float"]).mean()
     print("\nmean over floats:")
     print(means.to_string(float_format=lambda x: f"{x:.3f}"))
-    better = int((table["vel_rmse_legs"] < table["vel_rmse_smoother_fd"]).sum())
-    print(f"\nlegs' velocity RMSE below the smoother's finite difference on {better}/{len(table)} floats")
+    for col in ("vel", "vel5"):
+        better = int((table[f"{col}_rmse_legs"] < table[f"{col}_rmse_smoother_fd"]).sum())
+        print(f"{col}: legs' velocity RMSE below the smoother's finite difference on {better}/{len(table)} floats")
     if args.csv:
         table.to_csv(args.csv, index=False)
 

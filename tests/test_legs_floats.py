@@ -14,7 +14,6 @@ from rafostrack.config import load_config
 from rafostrack.estimates import TRACK_COLUMNS
 from rafostrack.evaluate import position_errors_km
 from rafostrack.legs.floats import calibrated_config, leg_prior
-from rafostrack.legs.outputs import bearing_deg
 
 
 @pytest.fixture(scope="module")
@@ -82,4 +81,3 @@ def test_calibrated_values_and_bearings():
     assert cfg.model.sound_speed_m_s == 1490.5 and cfg.model.toa_sigma_s == 1.5
     assert cfg.motion == config.motion
     assert leg_prior(config).duration_max == config.legs.duration_max_days
-    np.testing.assert_allclose(bearing_deg(np.array([0.0, np.pi / 2, np.pi, -np.pi / 2])), [90, 0, 270, 180])
