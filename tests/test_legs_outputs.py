@@ -52,4 +52,4 @@ def test_float_position_is_the_leg_without_wiggle_and_pulled_towards_the_window_
     fit.chain.levels[:] = 1  # s = 1 km: the window (sd 1 km about its centre) pulls halfway
     mean, _ = float_positions(fit)
     np.testing.assert_allclose(mean, [[10, 1], [20, 1], [20, 6]], atol=1e-6)
-    assert float_positions(fit)[1][0, 0, 0] == pytest.approx(0.5, abs=1e-3)
+    assert float_positions(fit)[1][0, 0, 0] == pytest.approx(0.5, abs=5e-3)  # grid spacing = s: discretised
