@@ -1,4 +1,4 @@
-"""Command-line interface: `rafostrack track`, `batch`, `simulate` and `config`.
+"""Command-line interface: `rafostrack track`, `legs`, `batch`, `simulate` and `config`.
 
 Thin: parse options, call the pipeline, report. A user mistake (`InputError`) prints one
 line `rafostrack: error: ...` and exits with code 2; `--debug` shows the traceback.
@@ -272,6 +272,52 @@ def track(
         f"{result.float_id}: {counts['windows']} windows ({status}), {counts['toas']} TOAs "
         f"({counts['labelled_beacon']} labelled to beacons, {counts['labelled_clutter']} clutter), "
         f"{result.run['runtime_s']:.1f} s -> {result.out_dir}"
+    )
+
+
+@main.command()
+@click.argument("float_file", type=click.Path(path_type=Path))
+@click.option(
+    "--beacons",
+    type=click.Path(path_type=Path),
+    help="Beacon table (default: beacons.csv beside FLOAT_FILE).",
+)
+@click.option("--floats", type=click.Path(path_type=Path), help="Float table (default: floats.csv beside FLOAT_FILE).")
+@click.option("--launch", callback=_parse_launch, metavar="LAT,LON", help="Override the launch position.")
+@click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
+@config_options("likelihood", "engine", "motion", "particles", "seed", "clutter_rate", "p_detect", "toa_sigma_s")
+@click.option("--iterations", type=click.IntRange(min=100), help="[legs] iterations: MCMC iterations of the leg fit.")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"), show_default=True)
+@click.option("--no-plots", is_flag=True, help="Skip the PNG plot.")
+@_report_errors
+def legs(float_file, beacons, floats, launch, config_file, iterations, out_dir, no_plots, **flags):
+    """Fit straight legs (speed, heading, duration) to FLOAT_FILE's arrival times by MCMC.
+
+    Tracks the float with the particle smoother first (as `track` does), then fits the leg
+    model to every window's arrival times, started from the smoother's track; writes
+    legs.parquet, legs_track.parquet, legs.png and legs_run.json to OUT/<float_id>/.
+    """
+    from .legs.floats import legs_float
+    from .pipeline import TrackInputs
+
+    overrides = _overrides(**flags)
+    if iterations is not None:
+        overrides.setdefault("legs", {})["iterations"] = iterations
+    inputs = TrackInputs(
+        float_path=float_file,
+        beacons_path=beacons,
+        floats_path=floats,
+        launch=launch,
+        config_files=(config_file,) if config_file else (),
+        overrides=overrides,
+    )
+    result = legs_float(inputs, out_dir, plots=not no_plots)
+    for message in result.run["warnings"]:
+        click.echo(f"rafostrack: warning: {message}", err=True)
+    k = result.run["legs"]
+    click.echo(
+        f"{result.float_id}: {result.run['windows']} windows, {k['map']} legs (posterior {k['posterior_q05']}-"
+        f"{k['posterior_q95']}), {result.run['runtime_s']:.1f} s -> {result.out_dir}"
     )
 
 

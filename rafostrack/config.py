@@ -201,6 +201,21 @@ class ABCConfig:
 
 
 @dataclass(frozen=True)
+class LegsConfig:
+    """`rafostrack legs`: the leg model's prior, the sampler and the likelihood grids (`rafostrack.legs`)."""
+
+    iterations: int = setting(">= 100", lambda v: v >= 100)
+    duration_min_days: float = setting("> 0", _positive)
+    duration_max_days: float = setting("> 0", _positive)
+    speed_mean_km_per_day: float = setting(">= 0", _non_negative)
+    speed_sd_km_per_day: float = setting("> 0", _positive)
+    heading_change_sd_deg: float = setting("> 0", _positive)
+    wiggle_max_km: float = setting(">= 0", _non_negative)
+    grid_spacing_km: float = setting("> 0", _positive)
+    grid_half_width_km: float = setting("> 0", _positive)
+
+
+@dataclass(frozen=True)
 class Config:
     model: ModelConfig
     motion: MotionConfig
@@ -214,6 +229,7 @@ class Config:
     quality: QualityConfig
     context: ContextConfig
     abc: ABCConfig
+    legs: LegsConfig
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return asdict(self)

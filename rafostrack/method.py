@@ -50,7 +50,8 @@ def track_record(
     """Track one float's record with the configured method (module docstring); keys in
     `explicit`, set by the user, are not estimated."""
     if not config.calibrate.enabled:
-        return Tracker.from_config(config, beacons, info).track(record, also_filtered=also_filtered)
+        out = Tracker.from_config(config, beacons, info).track(record, also_filtered=also_filtered)
+        return dataclasses.replace(out, model_inputs=(beacons, info, config))
     robust = first_pass_config(config, explicit)
     out = Tracker.from_config(robust, beacons, info).track(record)
     spent = {"filter_s": out.filter_s, "smoother_s": out.smoother_s, "calibrate_s": 0.0}
@@ -70,7 +71,7 @@ def track_record(
     if calibration is None:
         note = f"{info.float_id}: too few confident arrivals to calibrate; tracked with the configured values"
         out = Tracker.from_config(config, beacons, info).track(record, also_filtered=also_filtered)
-        return dataclasses.replace(out, warnings=[*out.warnings, note])
+        return dataclasses.replace(out, warnings=[*out.warnings, note], model_inputs=(beacons, info, config))
     report = {**calibration.report, "passes": 1 + config.calibrate.iterations}
     return dataclasses.replace(
         out,
@@ -78,4 +79,5 @@ def track_record(
         filter_s=spent["filter_s"],
         smoother_s=spent["smoother_s"],
         calibrate_s=spent["calibrate_s"],
+        model_inputs=(calibration.beacons, calibration.info, calibration.apply(config)),
     )

@@ -47,6 +47,10 @@ class TrackOutput:
     filter_ess: tuple[float, ...] = ()  # the filter's effective sample size at each window
     n_checks: int = 0  # windows the recovery monitor searched
     n_reseeds: int = 0  # windows where it re-seeded part of the cloud
+    # What the final pass tracked with: the beacon table, float and configuration (after
+    # calibration: corrected timing, clock residual, fitted model), for whoever reuses its
+    # model (e.g. `rafostrack.legs`).
+    model_inputs: tuple[BeaconTable, FloatInfo, Config] | None = None
 
     @property
     def track(self) -> pd.DataFrame:
