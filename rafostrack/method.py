@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Set
+from collections.abc import Callable, Set
 
 from .calibrate import Calibration, calibrate
 from .config import Config, with_overrides
@@ -46,14 +46,25 @@ def track_record(
     *,
     also_filtered: bool = False,
     explicit: Set[tuple[str, str]] = frozenset(),
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> TrackOutput:
     """Track one float's record with the configured method (module docstring); keys in
-    `explicit`, set by the user, are not estimated."""
+    `explicit`, set by the user, are not estimated. `progress(done, total, what)` is told of
+    each filter step of each pass."""
+    passes = 1 + config.calibrate.iterations if config.calibrate.enabled else 1
+
+    def told(number: int) -> Callable[[int, int], None] | None:
+        if progress is None:
+            return None
+        return lambda done, total: progress(done, total, f"pass {number} of {passes}")
+
     if not config.calibrate.enabled:
-        out = Tracker.from_config(config, beacons, info).track(record, also_filtered=also_filtered)
+        out = Tracker.from_config(config, beacons, info).track(record, also_filtered=also_filtered, progress=told(1))
         return dataclasses.replace(out, model_inputs=(beacons, info, config))
     robust = first_pass_config(config, explicit)
-    out = Tracker.from_config(robust, beacons, info).track(record)
+    # The passes that feed calibration are always smoothed (their labels and track then use
+    # the whole record), whatever the output asks for: the result does not depend on it.
+    out = dataclasses.replace(Tracker.from_config(robust, beacons, info), smooth=True).track(record, progress=told(1))
     spent = {"filter_s": out.filter_s, "smoother_s": out.smoother_s, "calibrate_s": 0.0}
     calibration: Calibration | None = None
     for iteration in range(config.calibrate.iterations):
@@ -63,21 +74,32 @@ def track_record(
         if fitted is None:
             break
         calibration = fitted
-        tracker = Tracker.from_config(calibration.apply(config), calibration.beacons, calibration.info)
-        last = iteration == config.calibrate.iterations - 1
-        out = tracker.track(record, also_filtered=also_filtered and last, extra_cov=calibration.nuisance_cov_at)
-        spent["filter_s"] += out.filter_s
-        spent["smoother_s"] += out.smoother_s
+        if iteration < config.calibrate.iterations - 1:
+            tracker = _calibrated_tracker(config, calibration)
+            out = dataclasses.replace(tracker, smooth=True).track(
+                record, extra_cov=calibration.nuisance_cov_at, progress=told(iteration + 2)
+            )
+            spent["filter_s"] += out.filter_s
+            spent["smoother_s"] += out.smoother_s
     if calibration is None:
         note = f"{info.float_id}: too few confident arrivals to calibrate; tracked with the configured values"
-        out = Tracker.from_config(config, beacons, info).track(record, also_filtered=also_filtered)
+        out = Tracker.from_config(config, beacons, info).track(
+            record, also_filtered=also_filtered, progress=told(passes)
+        )
         return dataclasses.replace(out, warnings=[*out.warnings, note], model_inputs=(beacons, info, config))
-    report = {**calibration.report, "passes": 1 + config.calibrate.iterations}
+    out = _calibrated_tracker(config, calibration).track(
+        record, also_filtered=also_filtered, extra_cov=calibration.nuisance_cov_at, progress=told(passes)
+    )
+    report = {**calibration.report, "passes": passes}
     return dataclasses.replace(
         out,
         calibration=report,
-        filter_s=spent["filter_s"],
-        smoother_s=spent["smoother_s"],
+        filter_s=spent["filter_s"] + out.filter_s,
+        smoother_s=spent["smoother_s"] + out.smoother_s,
         calibrate_s=spent["calibrate_s"],
         model_inputs=(calibration.beacons, calibration.info, calibration.apply(config)),
     )
+
+
+def _calibrated_tracker(config: Config, calibration: Calibration) -> Tracker:
+    return Tracker.from_config(calibration.apply(config), calibration.beacons, calibration.info)

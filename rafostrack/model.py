@@ -177,11 +177,14 @@ def association_factors(
     window_s: float,
     model: ModelConfig,
     ranked: bool = True,
+    source_log_ratio: NDArray | None = None,
 ) -> AssociationFactors:
     """The window's factors w_ij, u_i and the shared term (see module docstring).
 
     `ranked=False` gives the unranked baseline of eq. (19): an unheard beacon costs
-    1 - Pd whatever its predicted arrival.
+    1 - Pd whatever its predicted arrival. `source_log_ratio` (K,): per signal, evidence
+    that it came from a source rather than clutter (`rafostrack.quality`: its correlation
+    height), added to every term that gives it to a source (w_ij, and E_jj' for an echo).
     """
     lam = clutter_intensity(model, window_s)
     h = horizon_s(toa_s, max_signals, window_s)
@@ -197,6 +200,9 @@ def association_factors(
     if model.echo_fraction > 0 and k:
         no_echo, log_echo = echo_factors(toa_s, h, lam, model)
         log_match = log_match + no_echo[None, None, :]
+    if source_log_ratio is not None and k:
+        log_match = log_match + source_log_ratio[None, None, :]
+        log_echo = None if log_echo is None else log_echo + source_log_ratio[None, :]
     return AssociationFactors(log_match, log_unheard, k * np.log(lam) - lam * h, log_echo)
 
 

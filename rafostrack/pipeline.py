@@ -200,7 +200,13 @@ def track_float(
         )
     progress.phase("tracking")
     output = track_record(
-        loaded.beacons, loaded.info, config, loaded.record, also_filtered=also_filtered, explicit=loaded.explicit
+        loaded.beacons,
+        loaded.info,
+        config,
+        loaded.record,
+        also_filtered=also_filtered,
+        explicit=loaded.explicit,
+        progress=progress.step,
     )
     track_s = time.perf_counter() - started
 

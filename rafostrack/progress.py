@@ -5,9 +5,8 @@
 otherwise (a pipe, a log file, cron), so scripted output stays one line per float.
 
 The bar's elapsed time ticks while a phase runs (a refresh every `REFRESH_S`), so a long
-tracking phase is never silent. Within the tracking phase, `step(done, total)` shows the
-windows done when the tracker reports them (see `PHASES`; the tracker's own per-window
-callback is wired by `rafostrack.method.track_record` when it offers one).
+tracking phase is never silent. Within the tracking phase, `step(done, total, what)` shows
+the windows done by each filter pass as `rafostrack.method.track_record` reports them.
 """
 
 from __future__ import annotations
@@ -23,7 +22,7 @@ REFRESH_S = 0.5
 class Progress(Protocol):
     def phase(self, name: str) -> None: ...
 
-    def step(self, done: int, total: int) -> None: ...
+    def step(self, done: int, total: int, what: str = "") -> None: ...
 
     def close(self) -> None: ...
 
@@ -34,7 +33,7 @@ class NoProgress:
     def phase(self, name: str) -> None:
         pass
 
-    def step(self, done: int, total: int) -> None:
+    def step(self, done: int, total: int, what: str = "") -> None:
         pass
 
     def close(self) -> None:
@@ -56,6 +55,7 @@ class TerminalProgress:
             leave=False,
             dynamic_ncols=True,
         )
+        self._stream = stream
         self._phases: list[str] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -74,16 +74,19 @@ class TerminalProgress:
             self._phases.append(name)
             self._bar.set_postfix_str(name, refresh=True)
 
-    def step(self, done: int, total: int) -> None:
+    def step(self, done: int, total: int, what: str = "") -> None:
+        """Within the current phase: `done` of `total` steps of `what` (e.g. a filter pass)."""
         with self._lock:
             current = self._phases[-1] if self._phases else ""
-            self._bar.set_postfix_str(f"{current} (window {done}/{total})", refresh=False)
+            detail = f"{what}, " if what else ""
+            self._bar.set_postfix_str(f"{current} ({detail}window {done}/{total})", refresh=False)
 
     def close(self) -> None:
         self._stop.set()
         self._thread.join()
         with self._lock:
             self._bar.close()
+            self._stream.flush()  # the bar's last clearing before whatever is printed next
 
 
 def is_terminal(stream: IO[str]) -> bool:

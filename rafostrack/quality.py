@@ -12,8 +12,8 @@ factor w_ij of README "Model and methods") against the terms calling it clutter.
 capped at +-`max_abs_log_ratio` (the Gaussian tails are not to be trusted far out) and is 0
 for a signal without a height, or when the feature is off: the model is then unchanged.
 
-Hook (see the report for the lead): in the association factors, the log match weight of
-signal j for every beacon i, log w_ij, gets + log r_j.
+In the association factors (`model.association_factors`, `source_log_ratio`), the log match
+weight of signal j for every beacon i, log w_ij, gets + log r_j (and an echo's term likewise).
 """
 
 from __future__ import annotations

@@ -152,10 +152,12 @@ class Tracker:
         *,
         also_filtered: bool = False,
         extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None = None,
+        progress: Callable[[int, int], None] | None = None,
     ) -> TrackOutput:
         """Filter the record, then smooth if configured, and summarise. `extra_cov(times)`
         gives a (n, 2, 2) covariance (km^2) to add to each window's position covariance:
         what the filter's model does not represent (`Calibration.nuisance_cov_at`).
+        `progress(done, total)` is told of each filter step.
 
         Without smoothing, each step is summarised as the filter makes it and then dropped,
         so memory does not grow with the record; smoothing needs every step's cloud (about
@@ -166,16 +168,26 @@ class Tracker:
         def extra(time: np.datetime64) -> NDArray[np.float64] | None:
             return None if extra_cov is None else extra_cov(np.array([time], dtype="datetime64[ns]"))[0]
 
+        total = len(record.windows) + (self.end_fix is not None)
+        done = iter(range(1, total + 1))
+
+        def report(_: Step) -> None:
+            if progress is not None:
+                progress(next(done), total)
+
         if not self.smooth:
             builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered")
-            run = self.run_filter(
-                record, keep=False, on_step=lambda step: builder.add(step, extra_cov_km2=extra(step.cloud.time))
-            )
+
+            def summarise(step: Step) -> None:
+                builder.add(step, extra_cov_km2=extra(step.cloud.time))
+                report(step)
+
+            run = self.run_filter(record, keep=False, on_step=summarise)
             estimate = builder.result()
             elapsed = time.perf_counter() - started
             return TrackOutput(estimate, estimate, run.n_resamples, run.warnings, elapsed, 0.0, **_counts(run, builder))
 
-        run = self.run_filter(record, label_probs=also_filtered)
+        run = self.run_filter(record, label_probs=also_filtered, on_step=report)
         filter_s = time.perf_counter() - started
         times = np.array([s.cloud.time for s in run.steps], dtype="datetime64[ns]")
         nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))

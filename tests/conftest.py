@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import Path
 
 import numpy as np
@@ -28,9 +30,11 @@ def sim_mission_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def sim_mission() -> SimulatedMission:
-    """One synthetic float, 60 days, clutter 1 per window: the tracker's own model."""
+    """One synthetic float, 60 days, clutter 1 per window: the tracker's own model, one
+    arrival per detected source (no multipath, no echoes)."""
     beacons, floats = synthetic_scenario(days=60, rng=7)
-    return simulate_mission(beacons, floats, load_config().model, np.random.default_rng(7))
+    model = dataclasses.replace(load_config().model, multipath_fraction=0.0, echo_fraction=0.0)
+    return simulate_mission(beacons, floats, model, np.random.default_rng(7))
 
 
 @pytest.fixture(scope="session")

@@ -56,7 +56,7 @@ def test_matching_distance_is_the_best_partial_matching(gap):
 
 
 def test_simulated_windows_follow_the_model():
-    model = dataclasses.replace(load_config().model, clutter_rate=1.5, multipath_fraction=0.0)
+    model = dataclasses.replace(load_config().model, clutter_rate=1.5, multipath_fraction=0.0, echo_fraction=0.0)
     mu = np.array([[500.0, 1200.0, 4300.0, 2000.0]])  # the third arrives after the window
     p_detect = np.array([[0.9, 0.6, 0.9, 0.3]])
     rng = np.random.default_rng(1)
@@ -78,9 +78,25 @@ def test_simulated_windows_follow_the_model():
     assert len(first) / n == pytest.approx(0.9 * np.exp(-1.5 * 500.0 / WINDOW_S), abs=0.01)
 
 
+def test_simulated_echoes_follow_the_model():
+    """With echoes a detected signal comes twice with probability e, Exp(tau) apart, both
+    labelled with the source."""
+    model = dataclasses.replace(
+        load_config().model, clutter_rate=0.5, multipath_fraction=0.0, echo_fraction=0.2, multipath_delay_s=15.0
+    )
+    mu, p_detect = np.array([[500.0, 2000.0]]), np.array([[0.8, 0.8]])
+    toa, label = simulate_windows(
+        mu, p_detect, 40_000, model=model, window_s=WINDOW_S, max_signals=None, rng=np.random.default_rng(3)
+    )
+    heard = (label[0] == 0).sum(axis=1)
+    assert heard.max() == 2 and np.mean(heard == 2) == pytest.approx(0.8 * 0.2, abs=0.01)
+    pairs = np.sort(np.where(label[0] == 0, toa[0], np.inf), axis=1)[heard == 2]
+    assert np.mean(pairs[:, 1] - pairs[:, 0]) == pytest.approx(15.0, rel=0.05)
+
+
 def exact_loglik(mu: NDArray, p_detect: NDArray, toa: NDArray, r: int, model) -> tuple[NDArray, NDArray]:
     f = association_factors(mu, p_detect, toa, max_signals=r, window_s=WINDOW_S, model=model)
-    result = exact.associate(f.log_match, f.log_unheard)
+    result = exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo)
     return f.log_base + result.log_z, result.p_match
 
 
@@ -133,9 +149,9 @@ def test_abc_label_marginals_tend_to_the_exact_ones():
 
 def test_gaps_keep_an_unexplainable_toa_from_zeroing_every_weight():
     """Three stored TOAs, but the model can make at most two signals (two beacons, almost
-    no clutter): without gaps every weight is zero; with gaps the particles are still
-    ranked by the signals they do explain, and the stray TOA is called clutter."""
-    model = dataclasses.replace(load_config().model, clutter_rate=1e-9)
+    no clutter, no echoes): without gaps every weight is zero; with gaps the particles are
+    still ranked by the signals they do explain, and the stray TOA is called clutter."""
+    model = dataclasses.replace(load_config().model, clutter_rate=1e-9, echo_fraction=0.0)
     mu = np.array([[1000.0, 1500.0], [1040.0, 1540.0]])  # the second particle is 40 s off
     toa = np.array([1000.5, 1499.0, 3333.0])
     window = WindowPrediction(toa, mu, np.full(mu.shape, 0.9), 4, WINDOW_S, model, (1, 1, 1))

@@ -62,13 +62,15 @@ def test_track_writes_every_output(mission_dir, tmp_path):
         "loglik",
         "ambiguous",
         "second_mode_km",
+        "status",
     ]
+    assert set(track["status"]) <= {"ok", "ambiguous", "recovered", "unsupported"}
     assert str(track["time"].dtype) == "datetime64[ns, UTC]"
     labels = pd.read_parquet(out / "labels.parquet")
     assert list(labels.columns) == ["float_id", "time", "rank", "toa_s", "beacon_id", "prob", "p_clutter"]
 
     meta = read_metadata(out / "track.parquet")
-    assert meta["likelihood"] == "ranked" and meta["engine"] == "exact" and meta["motion"] == "random_walk"
+    assert meta["likelihood"] == "ranked" and meta["engine"] == "exact" and meta["motion"] == "ou"
     assert meta["config"]["filter"]["particles"] == 300
     assert meta["estimate"] == "smoothed"
     run = json.loads((out / "run.json").read_text())

@@ -48,7 +48,10 @@ def test_ranked_component_is_the_model_factors_summed_by_the_engine(sim_mission,
         ranked=ranked,
     )
     assert np.allclose(
-        evidence.loglik, f.log_base + exact.associate(f.log_match, f.log_unheard).log_z, rtol=0, atol=1e-12
+        evidence.loglik,
+        f.log_base + exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo).log_z,
+        rtol=0,
+        atol=1e-12,
     )
     assert evidence.p_match.shape == (50, len(wb.index), window.n_signals)
 
@@ -63,7 +66,10 @@ def test_a_wild_hand_label_is_widened_not_collapsed_onto(sim_mission):
     windows[k] = dataclasses.replace(bad, toa_s=np.concatenate([[bad.toa_s[0] + 500.0], bad.toa_s[1:]]))
     record = dataclasses.replace(sim.record, windows=tuple(windows))
     config = with_overrides(
-        load_config(), filter={"likelihood": "labeled", "particles": 500}, smoother={"enabled": False}
+        load_config(),
+        filter={"likelihood": "labeled", "particles": 500},
+        smoother={"enabled": False},
+        calibrate={"enabled": False},  # one pass with the configured model: one wild label, one warning
     )
     out = track_record(sim_mission.beacons, sim.info, config, record)
     assert len(out.warnings) == 1 and "sd was widened" in out.warnings[0]

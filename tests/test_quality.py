@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
+from rafostrack import model as m
 from rafostrack.config import load_config, with_overrides
+from rafostrack.engines import exact
 from rafostrack.quality import fit_quality, quality_log_ratio
 
 ON = dataclasses.replace(load_config().quality, enabled=True)
@@ -59,3 +61,21 @@ def test_quality_section_is_checked_like_any_other():
 
     with pytest.raises(InputError, match=r"\[quality\] source_sd: must be > 0"):
         with_overrides(load_config(), quality={"source_sd": 0.0})
+
+
+def test_heights_decide_between_two_equally_placed_signals():
+    """Two signals equally far from the one beacon's prediction: without heights each is the
+    beacon's half the time; a higher correlation height on the second makes it the source,
+    by exactly the odds r_1 / r_0 (the association sum's two matchings)."""
+    model = dataclasses.replace(load_config().model, echo_fraction=0.0, multipath_fraction=0.0)
+    mu, toa = np.array([[1000.0]]), np.array([998.0, 1002.0])
+
+    def p_source(ratio):
+        f = m.association_factors(mu, np.array([[0.9]]), toa, max_signals=4, window_s=4200.0, model=model,
+                                  source_log_ratio=ratio)  # fmt: skip
+        return exact.associate(f.log_match, f.log_unheard).p_match[0, 0]
+
+    plain = p_source(None)
+    assert plain[0] == pytest.approx(plain[1])
+    weighted = p_source(np.array([-1.0, 1.0]))
+    assert weighted[1] / weighted[0] == pytest.approx(np.exp(2.0), rel=1e-9)

@@ -19,7 +19,9 @@ from rafostrack.model import predicted_arrivals
 from rafostrack.scenarios import dimes_scenario, synthetic_scenario
 from rafostrack.simulate import SimulatedMission, simulate_drift, simulate_mission, summarize
 
-DEFAULT_MODEL = load_config().model
+# The simulator's checks below are of one arrival per detected source: echoes off (they have
+# their own test).
+DEFAULT_MODEL = dataclasses.replace(load_config().model, echo_fraction=0.0)
 NAT = np.datetime64("NaT", "ns")
 
 
@@ -330,3 +332,25 @@ def test_days_cuts_the_mission_consistently_at_the_simulated_track_end(tmp_path)
         # the float clock keeps its linear model: the end offset is the one at the new end
         expected = full[fid].clock_offset_s(np.datetime64(info.end_time))
         assert info.clock_offset_end_s == pytest.approx(float(expected), abs=0.01)
+
+
+def test_echoes_arrive_after_their_source_and_carry_its_label():
+    """With echo_fraction e, a detected source's signal comes a second time, Exp(tau) later,
+    labelled with the source: the windows that hold a source twice are about e of those
+    that hold it."""
+    beacons, floats = synthetic_scenario(days=150, rng=4)
+    model = model_with(echo_fraction=0.3, multipath_delay_s=15.0, clutter_rate=0.05, detection_range_km=0.0)
+    mission = simulate_mission(beacons, roomy(floats), model, np.random.default_rng(11))
+    twice = once = 0
+    delays = []
+    for sf in mission.floats:
+        for w in sf.record.windows:
+            labels = [b for b in (w.beacon_id or ()) if b is not None]
+            for b in set(labels):
+                times = w.toa_s[[k for k, x in enumerate(w.beacon_id or ()) if x == b]]
+                once += 1
+                if len(times) == 2:
+                    twice += 1
+                    delays.append(times[1] - times[0])
+    assert twice / once == pytest.approx(0.3, abs=0.03)
+    assert np.mean(delays) == pytest.approx(15.0, rel=0.1)

@@ -116,7 +116,8 @@ def test_smoothing_improves_on_filtering_and_is_calibrated():
     (loose: a small mission)."""
     config = with_overrides(load_config(), filter={"particles": 800})
     beacons, floats = synthetic_scenario(days=90, rng=3, n_floats=2)
-    mission = simulate_mission(beacons, floats, config.model, np.random.default_rng(3))
+    clean = dataclasses.replace(config.model, multipath_fraction=0.0, echo_fraction=0.0)  # one arrival per source
+    mission = simulate_mission(beacons, floats, clean, np.random.default_rng(3))
     rmse = {"filtered": [], "smoothed": []}
     covered, right, prob = [], [], []
     for sim in mission.floats:
@@ -161,7 +162,17 @@ def _two_beacon_stretch():
 
 def test_two_beacon_stretch_is_flagged_ambiguous():
     beacons, info, truth = _two_beacon_stretch()
-    config = with_overrides(load_config(), model={"clutter_rate": 0.5}, filter={"particles": 2000, "seed": 1})
+    # A random walk, and no calibration: with a velocity-persistent drift model, learnt or
+    # not, the float's steady 3 km/day northwards over the first 20 days rules out its mirror
+    # image's U-turn at the line (the mirror mode then dies, rightly). Here the arrival
+    # times alone must decide, and they cannot.
+    config = with_overrides(
+        load_config(),
+        model={"clutter_rate": 0.5},
+        filter={"particles": 2000, "seed": 1},
+        calibrate={"enabled": False},
+        motion={"model": "random_walk"},
+    )
     model = dataclasses.replace(config.model, p_detect=0.999999)  # simulate: every source heard
     record, _ = simulate_arrivals(beacons, info, model, truth, np.random.default_rng(5), days=40)
     out = track_record(beacons, info, config, record)
@@ -170,9 +181,12 @@ def test_two_beacon_stretch_is_flagged_ambiguous():
     assert not track["ambiguous"][day <= 18].any()  # three or four clean signals
     late = track[day >= 28]  # mirror images >= 48 km apart
     assert late["ambiguous"].mean() >= 0.8
-    assert (late["second_mode_km"] > 30).all()
+    assert (late.loc[late["ambiguous"], "second_mode_km"] > 30).all()  # where flagged: the mirror pair
     modes = out.estimate.modes.set_index("time")
-    for t, row in truth.set_index("time").loc[late.index].iterrows():
+    flagged = late.index[late["ambiguous"]]
+    for t, row in truth.set_index("time").loc[flagged].iterrows():
         m = modes.loc[[t]]
-        nearest = range_m(row.lat, row.lon, m["lat"].to_numpy(), m["lon"].to_numpy()).min() / 1e3
-        assert nearest < 10.0
+        # The truth is in one of the two modes: within 3 of that mode's sds (two ranges
+        # crossing at ~20 degrees fix the north-south position only to ~15 km).
+        distance = range_m(row.lat, row.lon, m["lat"].to_numpy(), m["lon"].to_numpy()) / 1e3
+        assert np.min(distance / m["sd_km"].to_numpy()) < 3.0

@@ -25,10 +25,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import model as m
-from ..config import Config, ModelConfig
+from ..config import Config, ModelConfig, QualityConfig
 from ..domain import BeaconTable, FloatInfo, Particles, Window
 from ..engines import Engine, SimulatingEngine, WindowPrediction, engine_from_config
 from ..errors import InputError
+from ..quality import quality_log_ratio
 from .base import Evidence, Likelihood, outlier_scale
 
 # Particles carrying less than this fraction of the mass are left out when association
@@ -84,11 +85,13 @@ class RankedArrivals(ArrivalLikelihood):
         engine: Engine | SimulatingEngine,
         ranked: bool = True,
         seed: int = 0,
+        quality: QualityConfig | None = None,
     ):
         super().__init__(beacons, info, model)
         self.engine = engine
         self.ranked = ranked
         self.seed = seed
+        self.quality = quality
 
     def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
         window = observation
@@ -111,9 +114,16 @@ class RankedArrivals(ArrivalLikelihood):
             window_s=self.info.window_s,
             model=self.model,
             ranked=self.ranked,
+            source_log_ratio=self._source_log_ratio(window),
         )
         assoc = self.engine(factors.log_match, factors.log_unheard, marginals=marginals, log_echo=factors.log_echo)
         return Evidence(factors.log_base + assoc.log_z, wb.index, assoc.p_match)
+
+    def _source_log_ratio(self, window: Window) -> NDArray | None:
+        """The window's correlation heights as source-vs-clutter evidence, when configured."""
+        if self.quality is None or not self.quality.enabled or window.quality is None:
+            return None
+        return quality_log_ratio(window.quality, self.quality)
 
 
 class LabelledArrivals(ArrivalLikelihood):
@@ -161,7 +171,7 @@ class LabelledArrivals(ArrivalLikelihood):
 ArrivalFactory = Callable[[BeaconTable, FloatInfo, Config], ArrivalLikelihood]
 
 ARRIVAL_LIKELIHOODS: dict[str, ArrivalFactory] = {
-    "ranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), True, c.filter.seed),
-    "unranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), False, c.filter.seed),
+    "ranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), True, c.filter.seed, c.quality),
+    "unranked": lambda b, i, c: RankedArrivals(b, i, c.model, engine_from_config(c), False, c.filter.seed, c.quality),
     "labeled": lambda b, i, c: LabelledArrivals(b, i, c.model),
 }

@@ -43,6 +43,7 @@ RIDGE_WIDTH_KM = 40.0
 CLEARANCE_M = 100.0
 GAP_DAYS = (30, 45, 60)  # no windows on days 30..44 (one motion step), empty ones on days 45..59
 CURRENT_KM_PER_DAY = (2.0, 2.0)
+EDDY_SD_KM_PER_DAY, EDDY_DAYS = 4.0, 10.0  # the truth's eddy velocity sd and time scale
 
 
 @dataclass(frozen=True)
@@ -85,7 +86,7 @@ def write_ridge_grid(path: Path, info: FloatInfo, cell_arcmin: float = 2.0) -> P
 
 def ridge_truth(info: FloatInfo, days: int, rng: np.random.Generator) -> pd.DataFrame:
     """Daily truth: the OU drift, each step redrawn while it would end too shallow."""
-    model = IntegratedOU(4.0, 10.0, CURRENT_KM_PER_DAY)
+    model = IntegratedOU(EDDY_SD_KM_PER_DAY, EDDY_DAYS, CURRENT_KM_PER_DAY)
     state = Particles(np.array([info.launch_lat]), np.array([info.launch_lon]), np.array([CURRENT_KM_PER_DAY]))
     lat, lon = [info.launch_lat], [info.launch_lon]
     for _ in range(days):
@@ -134,10 +135,14 @@ def track_pair(task: tuple[int, Sizes]) -> dict[str, Any]:
         for name, context in (("without", {}), ("with", {"bathymetry": str(grid)})):
             config = load_config(
                 overrides={
+                    # No calibration (the two runs differ by the context alone): the drift
+                    # model is the scenario's own, as calibration would learn it.
                     "calibrate": {"enabled": False},
                     "filter": {"particles": sz.particles, "seed": seed},
                     "motion": {"mean_current_east_km_per_day": CURRENT_KM_PER_DAY[0],
-                               "mean_current_north_km_per_day": CURRENT_KM_PER_DAY[1]},
+                               "mean_current_north_km_per_day": CURRENT_KM_PER_DAY[1],
+                               "velocity_sd_km_per_day": EDDY_SD_KM_PER_DAY,
+                               "decorrelation_days": EDDY_DAYS},
                     **({"context": context} if context else {}),
                 }
             )  # fmt: skip

@@ -135,7 +135,9 @@ class PaperSetting:
         seed: int = 0,
         smooth: bool = True,
     ) -> Config:
-        """The tracker's configuration: the model matches the simulation's."""
+        """The tracker's configuration: the paper's method (its random-walk motion, eq. 1; one
+        pass with the known model, no calibration, no lost-track recovery), with the model
+        matching the simulation's."""
         return with_overrides(
             load_config(),
             model={
@@ -144,11 +146,14 @@ class PaperSetting:
                 "p_detect": self.p_detect,
                 "clutter_rate": float(clutter_rate),
                 "multipath_fraction": 0.0,
+                "echo_fraction": 0.0,
                 "detection_range_km": 0.0,
                 "window_s": self.window_s,
                 "max_signals": self.max_signals,
             },
-            motion={"diffusion_km_per_day": float(diffusion_km_per_day)},
+            motion={"model": "random_walk", "diffusion_km_per_day": float(diffusion_km_per_day)},
+            calibrate={"enabled": False},
+            recovery={"enabled": False},
             fixes={"launch_sd_km": self.launch_sd_km, "use_end_fix": False},
             filter={**method_overrides(method), "particles": int(particles), "seed": int(seed)},
             smoother={"enabled": bool(smooth)},
