@@ -71,6 +71,8 @@ def label_rows(
 
 # Association marginals (s, K) of a window under some weights, and their beacon-table rows.
 LabelProbs = Callable[[Particles, NDArray, Window], tuple[NDArray, NDArray]]
+# Region labels of particles (regions parted by forbidden ground), or None.
+Regions = Callable[[Particles], NDArray[np.int64] | None]
 
 
 class EstimateBuilder:
@@ -78,7 +80,18 @@ class EstimateBuilder:
     from steps given one at a time, so a filter-only run can summarise its steps as they
     are made and keep none of them."""
 
-    def __init__(self, float_id: str, beacon_ids: NDArray, ambiguity: AmbiguityConfig, kind: str):
+    def __init__(
+        self,
+        float_id: str,
+        beacon_ids: NDArray,
+        ambiguity: AmbiguityConfig,
+        kind: str,
+        regions: Regions | None = None,
+    ):
+        """`regions(particles)`: labels of regions parted by forbidden ground (context
+        constraints, `likelihoods.MoveFactor.regions`), or None; a posterior in two of them
+        is reported by its heavier part (`posterior.two_modes`)."""
+        self.regions = regions
         self.float_id = float_id
         self.beacon_ids = beacon_ids
         self.ambiguity = ambiguity
@@ -113,9 +126,10 @@ class EstimateBuilder:
             min_separation_km=amb.min_separation_km,
             separation_factor=amb.separation_factor,
             extra_cov_km2=extra_cov_km2,
+            groups=None if self.regions is None else self.regions(cloud.particles),
         )
         self.window_ess.append(step.ess)
-        position = modes.first if modes.ambiguous else modes.whole
+        position = modes.position
         smaj, smin, angle = position.ellipse()
         self._track.append(
             (
@@ -180,11 +194,12 @@ def build_estimate(
     smoothed: Smoothed | None = None,
     label_probs: LabelProbs | None = None,
     extra_cov_km2: NDArray | None = None,
+    regions: Regions | None = None,
 ) -> Estimate:
     """Tables for every window among `steps`: filtered (each step's own weights), or under
     the `smoothed` weights (one array per step) with labels from `label_probs`;
     `extra_cov_km2` (one (2, 2) per step) widens the covariances."""
-    builder = EstimateBuilder(float_id, beacon_ids, ambiguity, "filtered" if smoothed is None else "smoothed")
+    builder = EstimateBuilder(float_id, beacon_ids, ambiguity, "filtered" if smoothed is None else "smoothed", regions)
     extra = [None] * len(steps) if extra_cov_km2 is None else list(extra_cov_km2)
     if smoothed is None:
         for step, cov in zip(steps, extra, strict=True):

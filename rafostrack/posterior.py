@@ -54,6 +54,13 @@ class Modes:
     second_weight: float
     separation_km: float
     ambiguous: bool
+    parted: bool = False  # the two parts lie in regions parted by forbidden ground (`groups`)
+
+    @property
+    def position(self) -> Gaussian2D:
+        """The position to report: the heavier mode where there are two separate ones or the
+        posterior is parted (its mean may lie on the forbidden ground between), else the whole."""
+        return self.first if self.ambiguous or self.parted else self.whole
 
 
 def _weighted_mean_cov(xy: NDArray, w: NDArray) -> tuple[NDArray, NDArray]:
@@ -74,6 +81,25 @@ def _frame(lat: NDArray, lon: NDArray, weights: NDArray) -> tuple[float, float, 
     return float(lat[ref]), float(lon[ref]), np.column_stack([east, north])
 
 
+def _parted(
+    xy: NDArray, weights: NDArray, groups: NDArray, kernel: NDArray, min_weight: float
+) -> tuple[tuple[float, NDArray, NDArray], tuple[float, NDArray, NDArray], bool] | None:
+    """The two heaviest regions as clusters (mass, mean, covariance), and whether the lighter
+    holds `min_weight`; None when one region holds all the mass."""
+    names, index = np.unique(groups, return_inverse=True)
+    mass = np.bincount(index, weights=weights, minlength=len(names))
+    if np.count_nonzero(mass) < 2:
+        return None
+    heavy = np.argsort(-mass, kind="stable")[:2]
+    total = weights.sum()
+    clusters = []
+    for g in heavy:
+        member = index == g
+        m, c = _weighted_mean_cov(xy[member], weights[member])
+        clusters.append((float(mass[g] / total), m, c + kernel))
+    return clusters[0], clusters[1], clusters[1][0] >= min_weight
+
+
 def summarise(lat: NDArray, lon: NDArray, weights: NDArray) -> Gaussian2D:
     """Weighted mean position and east/north covariance of a particle cloud."""
     ref_lat, ref_lon, xy = _frame(lat, lon, weights)
@@ -91,6 +117,7 @@ def two_modes(
     separation_factor: float,
     iterations: int = 20,
     extra_cov_km2: NDArray | None = None,
+    groups: NDArray[np.int64] | None = None,
 ) -> Modes:
     """Split the cloud into two clusters (weighted 2-means, started across the principal
     axis) and decide whether they are separate modes.
@@ -104,12 +131,24 @@ def two_modes(
     `extra_cov_km2`: a covariance added to every cluster's (when each particle stands for a
     Gaussian kernel of this covariance, as in a regularised smoother, or for what the
     particles' model leaves out).
+
+    `groups`: region labels of the particles (`likelihoods.MoveFactor.regions`: regions
+    parted by forbidden ground). When the cloud holds mass in two or more, the two clusters
+    are the two heaviest regions, not a 2-means split; they are separate modes whenever the
+    lighter holds `min_weight` (`Modes.parted` either way).
     """
     kernel = np.zeros((2, 2)) if extra_cov_km2 is None else np.asarray(extra_cov_km2)
     carried = weights > 0  # smoothing leaves exact zeros; they belong to no mode
     lat, lon, weights = lat[carried], lon[carried], weights[carried]
     ref_lat, ref_lon, xy = _frame(lat, lon, weights)
     mean, cov = _weighted_mean_cov(xy, weights)
+    if groups is not None:
+        parted = _parted(xy, weights, np.asarray(groups)[carried], kernel, min_weight)
+        if parted is not None:
+            (w1, m1, c1), (w2, m2, c2), ambiguous = parted
+            whole = _to_gaussian(ref_lat, ref_lon, mean, cov + kernel)
+            first, second = _to_gaussian(ref_lat, ref_lon, m1, c1), _to_gaussian(ref_lat, ref_lon, m2, c2)
+            return Modes(whole, first, second, w1, w2, float(np.hypot(*(m2 - m1))), ambiguous, True)
     axis = np.linalg.eigh(cov)[1][:, 1]
     side = np.einsum("pk,k->p", xy - mean, axis) > 0
     for _ in range(iterations):

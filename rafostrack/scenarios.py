@@ -94,8 +94,9 @@ def synthetic_scenario(
     Beacons on a ring of radius 600 km (the array ~1200 km across) around (-58, -90), with
     a random rotation, always active, no drift, transmission offsets spread evenly over
     0..1500 s in a random order. Floats launch within ~50 km of the centre on 2010-01-01
-    00:00Z, with an end fix 200-400 km away after `days` days and clock offsets within
-    +-2 s; window_s = 4200, max_signals = 4.
+    00:00Z, with an end fix 200-400 km away after `days` days (scaled by days / 60 for
+    shorter missions: a float drifts 3-7 km/day, not the 10-20 km/day that 200-400 km in 20
+    days would take) and clock offsets within +-2 s; window_s = 4200, max_signals = 4.
     """
     if n_beacons < 1 or n_floats < 1 or days < 1:
         raise ValueError("n_beacons, n_floats and days must be >= 1")
@@ -117,7 +118,7 @@ def synthetic_scenario(
     floats = []
     for j in range(n_floats):
         la, lo = displace(lat0, lon0, *_polar(gen.uniform(0, 50), gen.uniform(0, 2 * np.pi)))
-        ea, eo = displace(la, lo, *_polar(gen.uniform(200, 400), gen.uniform(0, 2 * np.pi)))
+        ea, eo = displace(la, lo, *_polar(gen.uniform(200, 400) * min(1.0, days / 60), gen.uniform(0, 2 * np.pi)))
         c0, c1 = gen.uniform(-2, 2, 2)
         floats.append(
             FloatInfo(

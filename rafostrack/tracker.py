@@ -18,8 +18,8 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from .config import AmbiguityConfig, Config
-from .domain import ArrivalRecord, BeaconTable, FloatInfo, PositionFix
-from .estimates import Estimate, EstimateBuilder, build_estimate
+from .domain import ArrivalRecord, BeaconTable, FloatInfo, Particles, PositionFix
+from .estimates import Estimate, EstimateBuilder, Regions, build_estimate
 from .filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
 from .likelihoods import (
     ArrivalLikelihood,
@@ -121,6 +121,20 @@ class Tracker:
             factors=move_factors_from_config(config, beacons, info),
         )
 
+    def _regions(self) -> Regions | None:
+        """Region labels from the first factor that parts the sea (context), if any."""
+        if not self.factors:
+            return None
+
+        def regions(particles: Particles) -> NDArray[np.int64] | None:
+            for factor in self.factors:
+                labels = factor.regions(particles)
+                if labels is not None:
+                    return labels
+            return None
+
+        return regions
+
     def run_filter(
         self,
         record: ArrivalRecord,
@@ -176,7 +190,7 @@ class Tracker:
                 progress(next(done), total)
 
         if not self.smooth:
-            builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered")
+            builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered", self._regions())
 
             def summarise(step: Step) -> None:
                 builder.add(step, extra_cov_km2=extra(step.cloud.time))
@@ -193,7 +207,9 @@ class Tracker:
         nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))
         filtered = None
         if also_filtered:
-            filtered = build_estimate(float_id, run.steps, self.beacon_ids, self.ambiguity, extra_cov_km2=nuisance)
+            filtered = build_estimate(
+                float_id, run.steps, self.beacon_ids, self.ambiguity, extra_cov_km2=nuisance, regions=self._regions()
+            )
         started = time.perf_counter()
         smoothed = smooth([s.cloud for s in run.steps], self.motion)
         estimate = build_estimate(
@@ -204,6 +220,7 @@ class Tracker:
             smoothed,
             self.arrivals.label_probs,
             extra_cov_km2=nuisance + np.array(smoothed.kernel_cov_km2).reshape(-1, 2, 2),
+            regions=self._regions(),
         )
         smoother_s = time.perf_counter() - started
         return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s, **_counts(run))

@@ -262,6 +262,9 @@ class ContextFactor(MoveFactor):
             log_cf, _ = entry_log_factor(self.grid, before.lon, before.lat, after.lon, after.lat)
         return np.maximum(log_cf, FORBIDDEN_LOG_WEIGHT)
 
+    def regions(self, particles: Particles) -> NDArray[np.int64] | None:
+        return self.grid.region_at(particles.lon, particles.lat)
+
 
 def context_factors(config: Config, beacons: BeaconTable, info: FloatInfo) -> tuple[MoveFactor, ...]:
     """The move factors `[context]` asks for (none when it asks for no context)."""

@@ -59,6 +59,18 @@ class ContextModel:
         return out
 
 
+# Cells with a CF below this are forbidden ground when the grid is split into regions.
+MIN_ALLOWED_CF = 0.01
+
+
+def label_regions(cf: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Allowed-region labels (0, 1, ...): connected 8-neighbour components of the cells with
+    CF >= `MIN_ALLOWED_CF`, so that two points in different regions are parted by forbidden
+    ground; `OUTSIDE` on forbidden cells."""
+    component, _ = ndimage.label(cf >= MIN_ALLOWED_CF, structure=np.ones((3, 3), dtype=int))
+    return np.where(component > 0, component - 1, OUTSIDE).astype(np.int64)
+
+
 def label_areas(cf: NDArray[np.float64], band_edges: Sequence[float] | None = None) -> NDArray[np.int64]:
     """Area labels (0, 1, ...): connected 4-neighbour components of cells in the same CF band
     (module docstring)."""
@@ -94,6 +106,7 @@ class ContextGrid:
     model: ContextModel | None = None
     evidence: dict[str, NDArray[np.intp]] | None = None
     area: NDArray[np.int64] = field(init=False)
+    region: NDArray[np.int64] = field(init=False)  # allowed regions (`label_regions`)
 
     def __post_init__(self) -> None:
         self.cf = np.asarray(self.cf, dtype=float)
@@ -106,6 +119,7 @@ class ContextGrid:
         if not 0 <= self.outside_cf <= 1:
             raise ValueError("outside_cf must be in [0, 1]")
         self.area = label_areas(self.cf, self.band_edges)
+        self.region = label_regions(self.cf)
 
     @classmethod
     def from_context(
@@ -139,6 +153,7 @@ class ContextGrid:
             self.evidence[name][r, c] = np.asarray(values, dtype=np.intp)
         self.cf[r, c] = self.model.cf({k: v[r, c] for k, v in self.evidence.items()})
         self.area = label_areas(self.cf, self.band_edges)
+        self.region = label_regions(self.cf)
 
     def cell_of(self, x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
         """Row, column and whether each point is inside the grid (row, column 0 outside)."""
@@ -161,3 +176,9 @@ class ContextGrid:
         """Area labels of the points (`OUTSIDE` outside the grid)."""
         row, col, inside = self.cell_of(x, y)
         return np.where(inside, self.area[row, col], OUTSIDE)
+
+    def region_at(self, x: ArrayLike, y: ArrayLike) -> NDArray[np.int64]:
+        """Allowed-region labels of the points (`label_regions`; `OUTSIDE` outside the grid or
+        on forbidden ground)."""
+        row, col, inside = self.cell_of(x, y)
+        return np.where(inside, self.region[row, col], OUTSIDE)

@@ -61,3 +61,9 @@ class MoveFactor(ABC):
     @abstractmethod
     def log_weight(self, before: Particles, after: Particles, observation: Any) -> NDArray[np.float64]:
         """log g per particle (0 where the factor does not apply)."""
+
+    def regions(self, particles: Particles) -> NDArray[np.int64] | None:
+        """Labels of the regions the particles are in, where regions are parted by ground the
+        factor forbids (a posterior on both sides of a ridge has two modes, whose mean lies on
+        the ridge); None when the factor parts nothing."""
+        return None

@@ -125,10 +125,11 @@ def section_floats(s: dict[str, Any]) -> list[str]:
         "tracked by `method.track_record` (calibration off) with and without `[context] bathymetry`.",
         "",
         "| context | smoothed RMSE (km) | RMSE days 30-64 (km) | smoothed positions where the sea floor is "
-        "shallower than the float |",
-        "|---|---:|---:|---:|",
+        "shallower than the float | ... by more than 2 sd of the grid's depth uncertainty (forbidden) |",
+        "|---|---:|---:|---:|---:|",
         *[
             f"| {name} | {_pm(t[name]['rmse_km'])} | {_pm(t[name]['rmse_gap_km'])} | "
+            f"{t[name].get('shallower_positions', '-')} of {t[name]['positions']} | "
             f"{t[name]['forbidden_positions']} of {t[name]['positions']} |"
             for name in ("without", "with")
         ],
