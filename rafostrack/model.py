@@ -33,13 +33,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import log_ndtr, ndtr
 
 from .config import ModelConfig
 from .domain import BeaconTable, FloatInfo, elapsed_days
 from .geodesy import range_m
-
-LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
+from .model_kernels import factors_kernel, toa_cdf_ufunc, toa_logpdf_ufunc
 
 
 @dataclass(frozen=True)
@@ -125,37 +123,15 @@ def window_prediction(
 
 
 def toa_logpdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
-    """log f(r) for the TOA error r = T - mu.
-
-    f = (1 - eps) N(r; 0, sigma^2) + eps EMG(r; sigma, tau), where the exponentially
-    modified Gaussian (Gaussian plus an Exp(mean tau) multipath delay) has
-    log EMG(r) = -log tau + sigma^2 / (2 tau^2) - r / tau + log Phi(r / sigma - sigma / tau).
-    """
-    sigma = model.toa_sigma_s
-    z = resid_s / sigma
-    log_gauss = -0.5 * z * z - np.log(sigma) - LOG_SQRT_2PI
-    eps = model.multipath_fraction
-    if eps == 0.0:
-        return log_gauss
-    tau = model.multipath_delay_s
-    log_emg = -np.log(tau) + sigma**2 / (2 * tau**2) - resid_s / tau + log_ndtr(z - sigma / tau)
-    return np.logaddexp(np.log1p(-eps) + log_gauss, np.log(eps) + log_emg)
+    """log f(r) for the TOA error r = T - mu: a Gaussian of sd sigma, mixed with an
+    exponentially delayed copy (multipath) of fraction eps and mean delay tau
+    (`model_kernels`, where the formulas are)."""
+    return toa_logpdf_ufunc(resid_s, model.toa_sigma_s, model.multipath_fraction, model.multipath_delay_s)
 
 
 def toa_cdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
-    """F(r) = P(T - mu <= r) for the density of `toa_logpdf`.
-
-    EMG: F(r) = Phi(r / sigma) - exp(sigma^2 / (2 tau^2) - r / tau) Phi(r / sigma - sigma / tau).
-    """
-    sigma = model.toa_sigma_s
-    z = resid_s / sigma
-    gauss = ndtr(z)
-    eps = model.multipath_fraction
-    if eps == 0.0:
-        return gauss
-    tau = model.multipath_delay_s
-    tail = np.exp(sigma**2 / (2 * tau**2) - resid_s / tau + log_ndtr(z - sigma / tau))
-    return (1 - eps) * gauss + eps * (gauss - tail)
+    """F(r) = P(T - mu <= r) for the density of `toa_logpdf` (`model_kernels`)."""
+    return toa_cdf_ufunc(resid_s, model.toa_sigma_s, model.multipath_fraction, model.multipath_delay_s)
 
 
 def clutter_intensity(model: ModelConfig, window_s: float) -> float:
@@ -188,14 +164,23 @@ def association_factors(
     """
     lam = clutter_intensity(model, window_s)
     h = horizon_s(toa_s, max_signals, window_s)
-    resid = toa_s[None, None, :] - mu_s[:, :, None]
-    log_match = np.log(p_detect)[:, :, None] + toa_logpdf(resid, model) - np.log(lam)
-    if ranked:
-        p_in = toa_cdf(h - mu_s, model) - toa_cdf(-mu_s, model)
-        log_unheard = np.log1p(-p_detect * np.clip(p_in, 0.0, 1.0))
-    else:
-        log_unheard = np.log1p(-p_detect)
+    mu = np.ascontiguousarray(mu_s, dtype=np.float64)
+    n, s = mu.shape
     k = len(toa_s)
+    log_match, log_unheard = np.empty((n, s, k)), np.empty((n, s))
+    factors_kernel(
+        mu,
+        np.ascontiguousarray(np.broadcast_to(p_detect, mu.shape), dtype=np.float64),
+        np.ascontiguousarray(toa_s, dtype=np.float64),
+        model.toa_sigma_s,
+        model.multipath_fraction,
+        model.multipath_delay_s,
+        float(np.log(lam)),
+        h,
+        ranked,
+        log_match,
+        log_unheard,
+    )
     log_echo = None
     if model.echo_fraction > 0 and k:
         no_echo, log_echo = echo_factors(toa_s, h, lam, model)

@@ -2,20 +2,20 @@
 
 Why this smoother: the filter's particles already cover where the float can be; what the
 later data change is how much each of them counts. FFBSm reweights the stored filter
-particles at every step with the exact recursion for the smoothed marginals (Doucet &
-Johansen 2009, eq. 49), so the track, its covariance and the labels use all the data
-without a second Monte Carlo layer: no backward-trajectory sampling noise (FFBSi), and no
-backward information filter to design for a nonlinear range model (two-filter).
-Cost O(N^2) per step for N particles, as N x N transition-density matrices.
+particles at every step with the recursion for the smoothed marginals (Doucet & Johansen
+2009, eq. 49), so the track, its covariance and the labels use all the data; no backward
+information filter to design for a nonlinear range model (two-filter).
 
 With filter weights W_t^i on particles x_t^i (after weighting by y_t, before resampling)
 and the motion model's transition density f(x' | x) (`rafostrack.motion`):
     W_{t|T}^i  proportional to  W_t^i sum_j W_{t+1|T}^j f(x_{t+1}^j | x_t^i) / sum_k W_t^k f(x_{t+1}^j | x_t^k),
 started from W_{T|T} = W_T. Every motion model is linear-Gaussian in a local tangent plane,
-f(x' | x) = N(x'; A x + b, Q): with a whitening W (W Q W^T = I), z_j = W (x'_j - b) and
-c_i = W A x_i, log f_ji = z_j . c_i - |c_i|^2 / 2 - |z_j|^2 / 2 + const. The last two
-terms are constant along row j and cancel, so with E_ji = W_t^i f_ji / max_i(W_t^i f_ji)
-and S_j = sum_i E_ji this is W_{t|T} proportional to E^T (W_{t+1|T} / S).
+f(x' | x) = N(x'; A x + b, Q) (or a mixture of such), evaluated after whitening
+(`smoother_kernel`). Exact FFBSm costs O(N^2) per step; when more than `MAX_ROWS` particles
+carry the smoothed weights at t + 1, they are represented by `MAX_ROWS` equal-weight
+quantile points of those weights (the sum over j is then a stratified estimate): O(N
+MAX_ROWS) per step, every filter particle still reweighted. (Backward simulation, FFBSi, is
+O(N M) for M trajectories too, but leaves only M points per step where this keeps N.)
 """
 
 from __future__ import annotations
@@ -25,11 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import logsumexp
 
 from .domain import Cloud, days_between
 from .geodesy import local_offsets_km
 from .motion import LinearGaussian, MotionModel
+from .smoother_kernel import backward_kernel
 
 # Particles whose weight is below this fraction of the largest weight are left out of the
 # O(N^2) products; their contribution is below float64 resolution of the result.
@@ -37,11 +37,10 @@ _PRUNE = 1e-14
 # Transition sd floor (km) for steps at the same instant (e.g. a fix at a window's time),
 # where the particles are copies: a 1 m kernel links each copy to its own ancestor.
 _MIN_SD_KM = 1e-3
-# Largest |z|^2 / 2 for which the kernel exponents are built in float32.
-_FLOAT32_REACH = 1e3
-# A broad mixture kernel is left out of a row where it adds less than this fraction.
-_MIXTURE_TOL = 1e-4
 _LOG_2PI = float(np.log(2.0 * np.pi))
+# Rows of the backward step: the smoothed weights at t + 1, when more particles carry them,
+# are represented by this many equal-weight points (deterministic stratified quantiles).
+MAX_ROWS = 512
 
 
 def _plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon: float) -> NDArray[np.float64]:
@@ -53,19 +52,17 @@ def _plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon
     return np.column_stack(columns)
 
 
-def _log_kernel(za: NDArray, zb: NDArray, dtype: type) -> NDArray:
-    """(J, I) of zb_j . za_i - |za_i|^2 / 2 in `dtype`, without BLAS."""
-    out = np.einsum("jk,ki->ji", zb.astype(dtype), np.ascontiguousarray(za.T, dtype=dtype))
-    out -= (0.5 * (za * za).sum(axis=1)).astype(dtype)[None, :]
-    return out
-
-
-def _whitened(kernel: LinearGaussian, xa: NDArray, xb: NDArray) -> tuple[NDArray, NDArray, NDArray, float]:
-    """z_a = W A x_a, z_b = W (x_b - b), W and log|det W| of a kernel (floored, `_MIN_SD_KM`)."""
-    white = kernel.whitening(_MIN_SD_KM)
-    za = np.einsum("kl,lm,im->ik", white, kernel.A, xa)
-    zb = np.einsum("kl,jl->jk", white, xb - kernel.b)
-    return za, zb, white, float(np.linalg.slogdet(white)[1])
+def _rows(weights: NDArray, max_rows: int) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """The particles carrying `weights` (above `_PRUNE` of the largest) and their normalised
+    weights; or, when more than `max_rows` do, the particles at the quantiles (k + 1/2) /
+    max_rows of the weights' cumulative sum, weighted by how many quantiles each holds."""
+    keep = np.flatnonzero(weights > _PRUNE * weights.max())
+    if len(keep) <= max_rows:
+        return keep, weights[keep] / weights[keep].sum()
+    cumulative = np.cumsum(weights[keep])
+    points = (np.arange(max_rows) + 0.5) / max_rows * cumulative[-1]
+    picked, counts = np.unique(np.searchsorted(cumulative, points, side="right"), return_counts=True)
+    return keep[np.minimum(picked, len(keep) - 1)], counts / max_rows
 
 
 def backward_step(
@@ -73,58 +70,34 @@ def backward_step(
     nxt: Cloud,
     smoothed_next: NDArray[np.float64],
     components: list[tuple[float, LinearGaussian]],
+    max_rows: int = MAX_ROWS,
 ) -> NDArray[np.float64]:
     """Smoothed weights at `now` from the smoothed weights at the next step (module docstring),
-    for a transition that is a mixture of linear-Gaussian kernels, the first the drift model
-    and any others broad (e.g. `motion.JumpMixture`'s jump).
-
-    The first kernel's (J, I) matrix is built in float32 (3x faster; weights agree with
-    float64 to ~1e-6) unless the exponents are large enough for float32 rounding to
-    matter, e.g. a zero-time step's 1 m kernel. A further kernel k enters row j only where
-    its peak density could add at least `_MIXTURE_TOL` to that row's predictive density
-    sum_i W_i f(x_j | x_i); elsewhere its share is below the float32 resolution of the
-    weights. Rows then combine in log space. Products and sums avoid BLAS, whose threaded
-    reductions would make the result depend on the machine's thread count.
-    """
+    for a transition that is a mixture of linear-Gaussian kernels (`smoother_kernel`). With
+    more than `max_rows` particles carrying the next step's smoothed weights they are
+    represented by `max_rows` equal-weight quantile points (`_rows`): O(N max_rows) per step
+    instead of O(N^2), the smoothed weights of every filter particle still computed."""
     keep_i = np.flatnonzero(now.weights > _PRUNE * now.weights.max())
-    keep_j = np.flatnonzero(smoothed_next > _PRUNE * smoothed_next.max())
-    ref = keep_j[np.argmax(smoothed_next[keep_j])]
+    rows, v = _rows(smoothed_next, max_rows)
+    ref = rows[np.argmax(v)]
     ref_lat, ref_lon = float(nxt.lat[ref]), float(nxt.lon[ref])
     xa = _plane_states(now, keep_i, ref_lat, ref_lon)
-    xb = _plane_states(nxt, keep_j, ref_lat, ref_lon)
-    log_w = np.log(now.weights[keep_i])
-    (w0, k0), *others = [(w, k) for w, k in components if w > 0]
-    za, zb, _, log_det = _whitened(k0, xa, xb)
-    reach = 0.5 * max(float((za * za).sum(axis=1).max()), float((zb * zb).sum(axis=1).max()))
-    dtype = np.float32 if reach < _FLOAT32_REACH else np.float64
-    log_e = _log_kernel(za, zb, dtype)
-    log_e += log_w.astype(dtype)[None, :]
-    row_max = log_e.max(axis=1, keepdims=True)
-    log_e -= row_max
-    e = np.exp(log_e, out=log_e)  # (J, I), each row's maximum is 1
-    # log sum_i W_i f0(x_j | x_i), with f0's row terms (its |z_j|^2 and normaliser).
-    row0 = np.log(w0) + log_det - 0.5 * k0.dim * _LOG_2PI - 0.5 * (zb * zb).sum(axis=1)
-    log_pred = row_max[:, 0].astype(np.float64) + np.log(e.sum(axis=1, dtype=np.float64)) + row0
-    extra = []  # (rows, (rows, I) kernel values in the common row scale) per broad kernel
-    for weight, kernel in others:
-        zak, zbk, _, log_det_k = _whitened(kernel, xa, xb)
-        log_peak = np.log(weight) + log_det_k - 0.5 * kernel.dim * _LOG_2PI
-        rows = np.flatnonzero(log_peak - log_pred > np.log(_MIXTURE_TOL))
-        if len(rows) == 0:
+    xb = _plane_states(nxt, rows, ref_lat, ref_lon)
+    za, zb, log_norm = [], [], []
+    for weight, kernel in components:
+        if weight <= 0:
             continue
-        rowk = log_peak - 0.5 * (zbk[rows] * zbk[rows]).sum(axis=1)
-        log_k = _log_kernel(zak, zbk[rows], np.float64) + log_w[None, :] + rowk[:, None]
-        extra.append((rows, log_k))
-    for rows, log_k in extra:
-        log_pred[rows] = np.logaddexp(log_pred[rows], logsumexp(log_k, axis=1))
-    # sum_j W_{t+1|T}^j W_i f_ji / pred_j, with W_i f0_ji = e_ji exp(row_max_j + row0_j).
-    scale = smoothed_next[keep_j] * np.exp(row_max[:, 0].astype(np.float64) + row0 - log_pred)
-    contrib = np.einsum("ji,j->i", e, scale.astype(e.dtype)).astype(np.float64)
-    for rows, log_k in extra:
-        contrib += np.einsum("ji,j->i", np.exp(log_k - log_pred[rows, None]), smoothed_next[keep_j][rows])
-    out = np.zeros_like(now.weights)
-    out[keep_i] = contrib
-    return out / out.sum()
+        white = kernel.whitening(_MIN_SD_KM)
+        za.append(np.einsum("kl,lm,im->ik", white, kernel.A, xa))
+        zb.append(np.einsum("kl,jl->jk", white, xb - kernel.b))
+        log_norm.append(np.log(weight) + float(np.linalg.slogdet(white)[1]) - 0.5 * kernel.dim * _LOG_2PI)
+    out = np.empty(len(keep_i))
+    backward_kernel(
+        np.ascontiguousarray(za), np.ascontiguousarray(zb), np.array(log_norm), np.log(now.weights[keep_i]), v, out
+    )
+    result = np.zeros_like(now.weights)
+    result[keep_i] = out
+    return result / result.sum()
 
 
 def silverman_bandwidth(n: int, dim: int) -> float:

@@ -117,7 +117,7 @@ class RankedArrivals(ArrivalLikelihood):
             source_log_ratio=self._source_log_ratio(window),
         )
         assoc = self.engine(factors.log_match, factors.log_unheard, marginals=marginals, log_echo=factors.log_echo)
-        return Evidence(factors.log_base + assoc.log_z, wb.index, assoc.p_match)
+        return Evidence(factors.log_base + assoc.log_z, wb.index, assoc.p_match if marginals else None)
 
     def _source_log_ratio(self, window: Window) -> NDArray | None:
         """The window's correlation heights as source-vs-clutter evidence, when configured."""
