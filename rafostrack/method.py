@@ -31,11 +31,16 @@ from .tracker import Tracker, TrackOutput
 
 def first_pass_config(config: Config, explicit: Set[tuple[str, str]]) -> Config:
     """The robust first pass: the TOA noise sd widened (unless the user set it), no
-    calibration."""
+    calibration, `[calibrate] particles` (`calibration_pass`)."""
     sigma = config.model.toa_sigma_s
     if ("model", "toa_sigma_s") not in explicit:
         sigma = max(sigma, config.calibrate.first_pass_toa_sigma_s)
-    return with_overrides(config, model={"toa_sigma_s": sigma})
+    return calibration_pass(with_overrides(config, model={"toa_sigma_s": sigma}))
+
+
+def calibration_pass(config: Config) -> Config:
+    """A pass that feeds calibration: at most `[calibrate] particles` particles."""
+    return with_overrides(config, filter={"particles": min(config.filter.particles, config.calibrate.particles)})
 
 
 def track_record(
@@ -75,7 +80,7 @@ def track_record(
             break
         calibration = fitted
         if iteration < config.calibrate.iterations - 1:
-            tracker = _calibrated_tracker(config, calibration)
+            tracker = _calibrated_tracker(calibration_pass(config), calibration)
             out = dataclasses.replace(tracker, smooth=True).track(
                 record, extra_cov=calibration.nuisance_cov_at, progress=told(iteration + 2)
             )

@@ -37,6 +37,20 @@ def _inverse_cdf(weights: NDArray, points: NDArray) -> NDArray[np.intp]:
     return np.searchsorted(cumulative, points, side="right")
 
 
+def quantile_points(weights: NDArray, n: int, prune: float = 0.0) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """At most `n` particles standing for `weights` (N,), and their normalised weights: the
+    particles above `prune` x the largest weight as they are when no more than `n`; else
+    those at the quantiles (k + 1/2) / n of the cumulative sum, each weighted by the number
+    of quantiles it holds / n (deterministic stratification: no random draw)."""
+    keep = np.flatnonzero(weights > prune * weights.max())
+    if len(keep) <= n:
+        return keep, weights[keep] / weights[keep].sum()
+    cumulative = np.cumsum(weights[keep])
+    points = (np.arange(n) + 0.5) / n * cumulative[-1]
+    picked, counts = np.unique(np.searchsorted(cumulative, points, side="right"), return_counts=True)
+    return keep[np.minimum(picked, len(keep) - 1)], counts / n
+
+
 def systematic(weights: NDArray, rng: np.random.Generator, n: int | None = None) -> NDArray[np.intp]:
     """Systematic resampling: one uniform U, points (U + k) / M, k = 0..M-1.
 

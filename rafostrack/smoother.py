@@ -13,9 +13,10 @@ started from W_{T|T} = W_T. Every motion model is linear-Gaussian in a local tan
 f(x' | x) = N(x'; A x + b, Q) (or a mixture of such), evaluated after whitening
 (`smoother_kernel`). Exact FFBSm costs O(N^2) per step; when more than `MAX_ROWS` particles
 carry the smoothed weights at t + 1, they are represented by `MAX_ROWS` equal-weight
-quantile points of those weights (the sum over j is then a stratified estimate): O(N
-MAX_ROWS) per step, every filter particle still reweighted. (Backward simulation, FFBSi, is
-O(N M) for M trajectories too, but leaves only M points per step where this keeps N.)
+quantile points of those weights (the sum over j is then a stratified estimate); a filter
+cloud of more than `MAX_COLUMNS` particles is smoothed on that many quantile points of its
+filter weights. O(min(N, MAX_COLUMNS) MAX_ROWS) per step, whatever N. (Backward simulation,
+FFBSi, is O(N M) for M trajectories too, but leaves only M points per step.)
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from numpy.typing import NDArray
 from .domain import Cloud, days_between
 from .geodesy import local_offsets_km
 from .motion import LinearGaussian, MotionModel
+from .resampling import quantile_points
 from .smoother_kernel import backward_kernel
 
 # Particles whose weight is below this fraction of the largest weight are left out of the
@@ -41,6 +43,9 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 # Rows of the backward step: the smoothed weights at t + 1, when more particles carry them,
 # are represented by this many equal-weight points (deterministic stratified quantiles).
 MAX_ROWS = 512
+# Columns: a filter cloud of more particles is smoothed on this many of them, its quantile
+# points (`resampling.quantile_points`); the others get smoothed weight zero.
+MAX_COLUMNS = 2000
 
 
 def _plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon: float) -> NDArray[np.float64]:
@@ -50,19 +55,6 @@ def _plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon
     if cloud.particles.velocity_km_per_day is not None:
         columns += list(cloud.particles.velocity_km_per_day[index].T)
     return np.column_stack(columns)
-
-
-def _rows(weights: NDArray, max_rows: int) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
-    """The particles carrying `weights` (above `_PRUNE` of the largest) and their normalised
-    weights; or, when more than `max_rows` do, the particles at the quantiles (k + 1/2) /
-    max_rows of the weights' cumulative sum, weighted by how many quantiles each holds."""
-    keep = np.flatnonzero(weights > _PRUNE * weights.max())
-    if len(keep) <= max_rows:
-        return keep, weights[keep] / weights[keep].sum()
-    cumulative = np.cumsum(weights[keep])
-    points = (np.arange(max_rows) + 0.5) / max_rows * cumulative[-1]
-    picked, counts = np.unique(np.searchsorted(cumulative, points, side="right"), return_counts=True)
-    return keep[np.minimum(picked, len(keep) - 1)], counts / max_rows
 
 
 def backward_step(
@@ -75,10 +67,11 @@ def backward_step(
     """Smoothed weights at `now` from the smoothed weights at the next step (module docstring),
     for a transition that is a mixture of linear-Gaussian kernels (`smoother_kernel`). With
     more than `max_rows` particles carrying the next step's smoothed weights they are
-    represented by `max_rows` equal-weight quantile points (`_rows`): O(N max_rows) per step
-    instead of O(N^2), the smoothed weights of every filter particle still computed."""
+    represented by `max_rows` equal-weight quantile points (`resampling.quantile_points`):
+    O(N max_rows) per step instead of O(N^2), the smoothed weight of every particle of `now`
+    still computed."""
     keep_i = np.flatnonzero(now.weights > _PRUNE * now.weights.max())
-    rows, v = _rows(smoothed_next, max_rows)
+    rows, v = quantile_points(smoothed_next, max_rows, _PRUNE)
     ref = rows[np.argmax(v)]
     ref_lat, ref_lon = float(nxt.lat[ref]), float(nxt.lon[ref])
     xa = _plane_states(now, keep_i, ref_lat, ref_lon)
@@ -132,7 +125,18 @@ class Smoothed:
     kernel_cov_km2: list[NDArray[np.float64]]
 
 
-def smooth(clouds: Sequence[Cloud], motion: MotionModel, *, regularise: bool = True) -> Smoothed:
+def _columns(cloud: Cloud, max_columns: int) -> tuple[Cloud, NDArray[np.intp]]:
+    """The cloud on at most `max_columns` of its particles (quantile points of its weights),
+    and their indices."""
+    if len(cloud.weights) <= max_columns:
+        return cloud, np.arange(len(cloud.weights))
+    index, weights = quantile_points(cloud.weights, max_columns)
+    return Cloud(cloud.time, cloud.particles.take(index), weights), index
+
+
+def smooth(
+    clouds: Sequence[Cloud], motion: MotionModel, *, regularise: bool = True, max_columns: int = MAX_COLUMNS
+) -> Smoothed:
     """Smoothed marginal weights of every step, given the filter's clouds in time order.
 
     `regularise`: each filter particle stands for a Gaussian kernel of covariance h^2 Sigma_t
@@ -145,16 +149,28 @@ def smooth(clouds: Sequence[Cloud], motion: MotionModel, *, regularise: bool = T
     slightly wider than exact (by about h^2 Sigma_t: a few per cent of the filter's spread).
     The smoothed marginal is then the mixture of those kernels: its covariance is the
     weighted particles' plus h^2 Sigma_t (`Smoothed.kernel_cov_km2`, the position block).
+
+    A cloud of more than `max_columns` particles is smoothed on `max_columns` quantile points
+    of its filter weights (`_columns`): a filter of many particles holds more of the
+    posterior's modes through the forward pass, and its backward pass costs no more than
+    `max_columns` x `MAX_ROWS` per step.
     """
     if not clouds:
         return Smoothed([], [])
-    smoothed = [np.empty(0)] * len(clouds)
-    smoothed[-1] = clouds[-1].weights / clouds[-1].weights.sum()
-    h2 = silverman_bandwidth(len(clouds[0].weights), motion.dim) ** 2 if regularise else 0.0
-    spreads = [h2 * cloud_covariance(c) if h2 > 0 else np.zeros((motion.dim, motion.dim)) for c in clouds]
-    for t in range(len(clouds) - 2, -1, -1):
-        components = motion.components(max(days_between(clouds[t].time, clouds[t + 1].time), 0.0))
+    columns = [_columns(c, max_columns) for c in clouds]
+    points = [cloud for cloud, _ in columns]
+    smoothed_points = [np.empty(0)] * len(points)
+    smoothed_points[-1] = points[-1].weights / points[-1].weights.sum()
+    h2 = silverman_bandwidth(len(points[0].weights), motion.dim) ** 2 if regularise else 0.0
+    spreads = [h2 * cloud_covariance(c) if h2 > 0 else np.zeros((motion.dim, motion.dim)) for c in points]
+    for t in range(len(points) - 2, -1, -1):
+        components = motion.components(max(days_between(points[t].time, points[t + 1].time), 0.0))
         if h2 > 0:
             components = [(components[0][0], regularised(components[0][1], spreads[t])), *components[1:]]
-        smoothed[t] = backward_step(clouds[t], clouds[t + 1], smoothed[t + 1], components)
+        smoothed_points[t] = backward_step(points[t], points[t + 1], smoothed_points[t + 1], components)
+    smoothed = []
+    for cloud, (_, index), weights in zip(clouds, columns, smoothed_points, strict=True):
+        full = np.zeros(len(cloud.weights))
+        np.add.at(full, index, weights)
+        smoothed.append(full)
     return Smoothed(smoothed, [s[:2, :2] for s in spreads])

@@ -23,6 +23,10 @@ import numpy as np
 from numba import njit
 
 MIXTURE_TOL = 1e-4
+# exp(-48) < 1e-20: terms this far below a row's largest are left out of its sums.
+NEGLIGIBLE = -48.0
+# exp(-48) < 1e-20: terms this far below a row's largest are left out of its sums.
+NEGLIGIBLE = -48.0
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -43,6 +47,18 @@ def _row(za, zb, log_norm, log_w, c, j, row):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
+def _exp_shifted(row, top):  # pragma: no cover - compiled
+    """row_i <- exp(row_i - top), zero where row_i - top <= NEGLIGIBLE (a share below 1e-20
+    of the row's sum: beyond float64 resolution); returns the sum."""
+    total = 0.0
+    for i in range(row.shape[0]):
+        shifted = row[i] - top
+        row[i] = math.exp(shifted) if shifted > NEGLIGIBLE else 0.0
+        total += row[i]
+    return total
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
 def backward_kernel(za, zb, log_norm, log_w, v, out):  # pragma: no cover - compiled
     """za (C, I, d), zb (C, J, d), log_norm (C,), log_w (I,), v (J,) -> out (I,) (module
     docstring)."""
@@ -56,28 +72,26 @@ def backward_kernel(za, zb, log_norm, log_w, v, out):  # pragma: no cover - comp
         top = _row(za, zb, log_norm, log_w, 0, j, row)
         if top == -np.inf:
             continue
-        total = 0.0
-        for i in range(n_i):
-            total += math.exp(row[i] - top)
-        log_pred = top + math.log(total)
+        log_pred = top + math.log(_exp_shifted(row, top))
         mixed = False
         for c in range(1, n_comp):
-            if log_norm[c] - log_pred < math.log(MIXTURE_TOL):
-                continue
-            mixed = True
-            _row(za, zb, log_norm, log_w, c, j, extra)
-            for i in range(n_i):
-                a, b = row[i], extra[i]
-                big = max(a, b)
-                row[i] = big + math.log1p(math.exp(-abs(a - b))) if big > -np.inf else big
+            mixed = mixed or log_norm[c] - log_pred >= math.log(MIXTURE_TOL)
         if mixed:
+            # Back to log terms, every component log-added in (rare: the jump's share matters).
+            _row(za, zb, log_norm, log_w, 0, j, row)
+            for c in range(1, n_comp):
+                _row(za, zb, log_norm, log_w, c, j, extra)
+                for i in range(n_i):
+                    a, b = row[i], extra[i]
+                    big = max(a, b)
+                    row[i] = big + math.log1p(math.exp(-abs(a - b))) if big > -np.inf else big
             top = -np.inf
             for i in range(n_i):
-                if row[i] > top:
-                    top = row[i]
-            total = 0.0
-            for i in range(n_i):
-                total += math.exp(row[i] - top)
-            log_pred = top + math.log(total)
+                top = max(top, row[i])
+            _exp_shifted(row, top)
+        total = 0.0
         for i in range(n_i):
-            out[i] += v[j] * math.exp(row[i] - log_pred)
+            total += row[i]
+        scale = v[j] / total
+        for i in range(n_i):
+            out[i] += scale * row[i]

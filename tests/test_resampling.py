@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rafostrack.resampling import ess, normalise_log_weights, systematic
+from rafostrack.resampling import ess, normalise_log_weights, quantile_points, systematic
 
 
 def test_systematic_copies_each_particle_floor_or_ceil_times():
@@ -31,3 +31,19 @@ def test_log_weights_survive_huge_magnitudes():
 def test_ess_bounds():
     assert ess(np.full(10, 0.1)) == pytest.approx(10.0)
     assert ess(np.eye(1, 10)[0]) == pytest.approx(1.0)
+
+
+def test_quantile_points_stand_for_the_weights():
+    """Quantile points: at most n particles, weights summing to 1, each particle's weight
+    within 1/n of its own; particles as they are when few carry the weight."""
+    rng = np.random.default_rng(5)
+    w = rng.gamma(0.3, size=5000)
+    w /= w.sum()
+    index, v = quantile_points(w, 400)
+    assert len(index) <= 400 and np.isclose(v.sum(), 1.0) and np.all(np.diff(index) > 0)
+    assert np.all(np.abs(v - w[index]) <= 1.0 / 400 + 1e-12)
+    assert w[np.setdiff1d(np.arange(5000), index)].max() < 1.0 / 400
+    few = np.zeros(5000)
+    few[[3, 70, 900]] = [0.2, 0.3, 0.5]
+    index, v = quantile_points(few, 400, prune=1e-14)
+    assert index.tolist() == [3, 70, 900] and np.allclose(v, [0.2, 0.3, 0.5])
