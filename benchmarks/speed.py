@@ -1,10 +1,14 @@
-"""Wall time to track the 2-year sample float (float767) with the default settings.
+"""Wall time to track the 2-year sample float (float767) with the default method.
 
-Prints, per method, the filter's time (in total and per window) and the smoother's (the
-backward pass plus the smoothed labels) and their ratio; `--profile` prints the top
-functions by cumulative time (cProfile), for finding what to optimise.
+Prints, per method and particle count, the time of the whole method (all its passes:
+the robust pass, calibration, the calibrated passes), split into filter, smoother (backward
+pass plus smoothed labels and summaries) and calibration (the Kalman fit and association
+EM), with the track's RMSE against the sample's truth, the labels right and the median ESS
+of the last pass; `--profile` prints the top functions by cumulative time (cProfile), for
+finding what to optimise. Run on one core (`OMP_NUM_THREADS=1 taskset -c 0`) for figures
+that do not depend on what else runs.
 
-    python benchmarks/speed.py [--methods exact bp] [--profile]
+    python benchmarks/speed.py [--methods exact bp] [--particles 1000 10000] [--profile]
 """
 
 from __future__ import annotations
@@ -15,7 +19,11 @@ import pstats
 import time
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
+
 from rafostrack.config import method_overrides, with_overrides
+from rafostrack.evaluate import association_accuracy, rmse_km
 from rafostrack.method import track_record
 from rafostrack.pipeline import TrackInputs, load_float
 
@@ -26,6 +34,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--float-file", type=Path, default=SAMPLE)
     parser.add_argument("--methods", nargs="+", default=["exact", "bp", "unranked", "labeled"])
+    parser.add_argument("--particles", type=int, nargs="+", default=[1000, 10000])
     parser.add_argument("--profile", action="store_true")
     args = parser.parse_args()
 
@@ -33,24 +42,32 @@ def main() -> None:
     n_windows = len(loaded.record.windows)
     n_toas = sum(w.n_signals for w in loaded.record.windows)
     print(f"{args.float_file.name}: {n_windows} windows, {n_toas} TOAs, {len(loaded.beacons)} beacons")
-    print(f"{'method':>9} {'particles':>9} {'filter_s':>9} {'ms/window':>10} {'smoother_s':>10} {'ratio':>6}")
+    truth = pd.read_csv(args.float_file.parent / "truth" / args.float_file.name, parse_dates=["time"])
+    truth["time"] = truth["time"].dt.tz_localize(None)
+    print(
+        f"{'method':>9} {'particles':>9} {'total_s':>8} {'filter_s':>9} {'smoother_s':>10} {'calib_s':>8} "
+        f"{'rmse_km':>8} {'labels':>7} {'ess/N':>6}"
+    )
     for method in args.methods:
-        config = with_overrides(loaded.config, filter=method_overrides(method))
-        profiler = cProfile.Profile() if args.profile else None
-        started = time.perf_counter()
-        if profiler:
-            profiler.enable()
-        out = track_record(loaded.beacons, loaded.info, config, loaded.record)
-        if profiler:
-            profiler.disable()
-        elapsed = time.perf_counter() - started
-        print(
-            f"{method:>9} {config.filter.particles:9d} {out.filter_s:9.2f} {1e3 * out.filter_s / n_windows:10.2f} "
-            f"{out.smoother_s:10.2f} {out.smoother_s / out.filter_s:6.2f}   (total {elapsed:.2f} s)",
-            flush=True,
-        )
-        if profiler:
-            pstats.Stats(profiler).sort_stats("cumulative").print_stats(15)
+        for particles in args.particles:
+            config = with_overrides(loaded.config, filter={**method_overrides(method), "particles": particles})
+            profiler = cProfile.Profile() if args.profile else None
+            started = time.perf_counter()
+            if profiler:
+                profiler.enable()
+            out = track_record(loaded.beacons, loaded.info, config, loaded.record, explicit=loaded.explicit)
+            if profiler:
+                profiler.disable()
+            elapsed = time.perf_counter() - started
+            print(
+                f"{method:>9} {particles:9d} {elapsed:8.2f} {out.filter_s:9.2f} {out.smoother_s:10.2f} "
+                f"{out.calibrate_s:8.2f} {rmse_km(out.track, truth):8.2f} "
+                f"{association_accuracy(out.labels, loaded.record):7.2%} "
+                f"{np.median(out.filter_ess) / particles:6.2f}",
+                flush=True,
+            )
+            if profiler:
+                pstats.Stats(profiler).sort_stats("cumulative").print_stats(15)
 
 
 if __name__ == "__main__":

@@ -213,7 +213,9 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
             (offsets, scale),
             (drifts, scale * problem.drift_days),
         ],
-        float(np.sum(np.log(scale))),
+        # log sqrt(w): constant in the hyperparameters; rows of weight 0 (surely not the
+        # direct path) carry no information and no term.
+        float(np.sum(np.log(scale[scale > 0]))),
     )
     return resid
 

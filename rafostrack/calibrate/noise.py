@@ -1,8 +1,9 @@
 """Arrival-time noise and clutter, estimated from a first pass.
 
-TOA noise: maximum likelihood of the model's error density (`model.toa_logpdf`: a
-Gaussian of sd sigma, mixed with an exponentially delayed copy for multipath, fraction eps,
-mean delay tau) on the residuals of confidently labelled arrivals after the timing fit.
+Multipath: maximum likelihood of the model's error density (`model.toa_logpdf`: a Gaussian
+of sd sigma, mixed with an exponentially delayed copy for multipath, fraction eps, mean
+delay tau) over eps and tau, on the residuals of confidently labelled arrivals after the
+timing fit (`calibrate.kalman`, which gives sigma).
 
 Clutter: the expected number of clutter signals over the time the windows could store
 them. A window stores clutter on [0, h] (h = the last stored TOA when the window is full,
@@ -24,39 +25,11 @@ from ..domain import ArrivalRecord, FloatInfo
 from ..model import horizon_s, toa_logpdf
 
 
-def fit_toa_noise(residual_s: NDArray, model: ModelConfig) -> tuple[float, float, float]:
-    """(sigma, eps, tau) maximising sum log f(r) over the residuals, started from the model's
-    values; eps in [1e-4, 0.3], sigma in [0.2, 20] s, tau in [8, 200] s (a delay shorter than a few
-    sigma would be indistinguishable from the Gaussian core, and take part of it)."""
-    r = np.asarray(residual_s, dtype=float)
-
-    def unpack(p: NDArray) -> ModelConfig:
-        return dataclasses.replace(
-            model,
-            toa_sigma_s=float(np.clip(np.exp(p[0]), 0.2, 20.0)),
-            multipath_fraction=float(np.clip(expit(p[1]), 1e-4, 0.3)),
-            multipath_delay_s=float(np.clip(np.exp(p[2]), 8.0, 200.0)),
-        )
-
-    def cost(p: NDArray) -> float:
-        return -float(np.sum(toa_logpdf(r, unpack(p))))
-
-    start = np.array(
-        [
-            np.log(model.toa_sigma_s),
-            logit(min(max(model.multipath_fraction, 0.02), 0.5)),
-            np.log(model.multipath_delay_s),
-        ]
-    )
-    best = minimize(cost, start, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6, "maxiter": 2000})
-    fitted = unpack(best.x)
-    return fitted.toa_sigma_s, fitted.multipath_fraction, fitted.multipath_delay_s
-
-
 def fit_multipath(residual_s: NDArray, toa_sigma_s: float, model: ModelConfig) -> tuple[float, float]:
     """(eps, tau) maximising sum log f(r) with sigma fixed at `toa_sigma_s` (the EM step
-    of the timing fit: sigma itself comes from the marginal likelihood); bounds as in
-    `fit_toa_noise`."""
+    of the timing fit: sigma itself comes from the Kalman smoother's marginal likelihood);
+    eps in [1e-4, 0.3], tau in [8, 200] s (a delay shorter than a few sigma would be
+    indistinguishable from the Gaussian core, and take part of it)."""
     r = np.clip(np.asarray(residual_s, dtype=float), -300.0, 300.0)
 
     def unpack(p: NDArray) -> ModelConfig:

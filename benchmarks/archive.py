@@ -1,0 +1,138 @@
+"""A DIMES-size archive through `rafostrack batch`: floats per minute and peak memory.
+
+Simulates the DIMES experiment as an archive: the 140 real launch/recovery pairs
+(`benchmarks/data/dimes_all_floats.csv`, from `../shared/data`) and the 12 real sound
+sources, each float drifting from its launch to its recovery fix (integrated OU eddies
+around the mean velocity, `rafostrack.simulate`), arrival times simulated along the drift
+with the default measurement model (clutter 1 per window, multipath, echoes). The mission
+directory holds no `rafostrack.toml`, so the floats are tracked with the default settings,
+as a user's archive would be. Then runs the installed `rafostrack batch` on it as cron
+would (a fresh process, no plots), with `--jobs` = all cores, and, with `--dask`, again on
+a Dask LocalCluster of as many single-threaded workers (`--scheduler`). Prints wall time,
+floats per minute, window-days per second, and the peak resident memory of the largest
+process (the batch process and its workers: `ru_maxrss` of the children; for Dask, of the
+workers as reported by the scheduler).
+
+    python benchmarks/archive.py [--floats 140] [--days N] [--jobs N] [--dask] [--keep DIR]
+
+`--floats K` takes the first K floats (a quick look; floats/min is per float of ~2 years).
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rafostrack.batch import default_jobs
+from rafostrack.config import load_config
+from rafostrack.domain import FloatInfo
+from rafostrack.io.mission_writer import write_mission
+from rafostrack.scenarios import dimes_scenario
+from rafostrack.simulate import simulate_mission
+
+FLOATS_CSV = Path(__file__).resolve().parent / "data" / "dimes_all_floats.csv"
+
+
+def dimes_archive_floats(n_floats: int | None = None) -> list[FloatInfo]:
+    """The real DIMES floats (launch and recovery fixes, dates, clock offsets)."""
+    table = pd.read_csv(FLOATS_CSV, dtype={"float_id": str})
+    if n_floats is not None:
+        table = table.head(n_floats)
+
+    def day(text: str) -> np.datetime64:
+        return pd.Timestamp(text).tz_convert(None).floor("D").to_datetime64().astype("datetime64[ns]")
+
+    return [
+        FloatInfo(
+            float_id=f"float{row.float_id}",
+            launch_time=day(row.launch_time),
+            launch_lat=float(row.launch_lat),
+            launch_lon=float(row.launch_lon),
+            end_time=day(row.end_time),
+            end_lat=float(row.end_lat),
+            end_lon=float(row.end_lon),
+            clock_offset_start_s=float(row.clock_offset_start_s),
+            clock_offset_end_s=float(row.clock_offset_end_s),
+            window_s=4200.0,
+            max_signals=4,
+        )
+        for row in table.itertuples()
+    ]
+
+
+def _rafostrack() -> str:
+    exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
+    if exe is None:
+        raise SystemExit("no rafostrack entry point beside this Python: pip install -e . first")
+    return exe
+
+
+def _run(command: list[str]) -> float:
+    started = time.perf_counter()
+    proc = subprocess.run(command, capture_output=True, text=True, check=False)
+    elapsed = time.perf_counter() - started
+    if proc.returncode != 0:
+        raise SystemExit(f"batch failed ({proc.returncode}):\n{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
+    return elapsed
+
+
+def _report(label: str, elapsed: float, n_floats: int, n_windows: int, peak_mb: float) -> None:
+    print(
+        f"{label:>18} {elapsed:8.1f} {n_floats / elapsed * 60:10.2f} {n_windows / elapsed:12.1f} {peak_mb:12.0f}",
+        flush=True,
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--floats", type=int, default=None, help="the first K floats (default: all 140)")
+    parser.add_argument("--jobs", type=int, default=default_jobs())
+    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--dask", action="store_true", help="also run on a Dask LocalCluster")
+    parser.add_argument("--keep", type=Path, help="write the archive and outputs here instead of a temporary dir")
+    args = parser.parse_args()
+
+    root = args.keep or Path(tempfile.mkdtemp(prefix="rafostrack-archive-"))
+    try:
+        mission = root / "archive" / "dimes"
+        beacons, _ = dimes_scenario()
+        floats = dimes_archive_floats(args.floats)
+        started = time.perf_counter()
+        simulated = simulate_mission(beacons, floats, load_config().model, np.random.default_rng(args.seed))
+        write_mission(simulated, mission)
+        (mission / "rafostrack.toml").unlink()  # the default settings, as for a user's archive
+        n_windows = sum(len(f.record.windows) for f in simulated.floats)
+        print(
+            f"archive: {len(floats)} DIMES floats, {len(beacons)} sources, {n_windows} windows "
+            f"({n_windows / len(floats):.0f} per float), simulated in {time.perf_counter() - started:.0f} s; "
+            f"{args.jobs} job(s) on {default_jobs()} core(s)"
+        )
+        print(f"{'run':>18} {'wall s':>8} {'floats/min':>10} {'windows/s':>12} {'peak MB':>12}")
+        command = [_rafostrack(), "batch", str(mission.parent), "--no-plots", "--jobs", str(args.jobs)]
+        elapsed = _run([*command, "--out", str(root / "out-local")])
+        peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        _report(f"local --jobs {args.jobs}", elapsed, len(floats), n_windows, peak_mb)
+        if args.dask:
+            from dask.distributed import LocalCluster
+
+            with LocalCluster(n_workers=args.jobs, threads_per_worker=1, processes=True) as cluster:
+                client = cluster.get_client()
+                elapsed = _run([*command, "--out", str(root / "out-dask"), "--scheduler", cluster.scheduler_address])
+                rss = client.run(lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+                _report(f"dask {args.jobs} workers", elapsed, len(floats), n_windows, max(rss.values()) / 1024)
+    finally:
+        if args.keep is None:
+            shutil.rmtree(root, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
