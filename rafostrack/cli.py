@@ -7,6 +7,7 @@ line `rafostrack: error: ...` and exits with code 2; `--debug` shows the traceba
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
 from typing import Any
@@ -189,16 +190,29 @@ def main(debug: bool) -> None:
     """Track RAFOS floats from unlabelled, ranked arrival times."""
 
 
+def float_inputs(command: Callable[..., Any]) -> Callable[..., Any]:
+    """The inputs of a one-float command (track, legs): FLOAT_FILE and the tables beside it."""
+    for option in reversed(
+        [
+            click.argument("float_file", type=click.Path(path_type=Path)),
+            click.option(
+                "--beacons",
+                type=click.Path(path_type=Path),
+                help="Beacon table (default: beacons.csv beside FLOAT_FILE).",
+            ),
+            click.option(
+                "--floats", type=click.Path(path_type=Path), help="Float table (default: floats.csv beside FLOAT_FILE)."
+            ),
+            click.option("--launch", callback=_parse_launch, metavar="LAT,LON", help="Override the launch position."),
+            click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer."),
+        ]
+    ):
+        command = option(command)
+    return command
+
+
 @main.command()
-@click.argument("float_file", type=click.Path(path_type=Path))
-@click.option(
-    "--beacons",
-    type=click.Path(path_type=Path),
-    help="Beacon table (default: beacons.csv beside FLOAT_FILE).",
-)
-@click.option("--floats", type=click.Path(path_type=Path), help="Float table (default: floats.csv beside FLOAT_FILE).")
-@click.option("--launch", callback=_parse_launch, metavar="LAT,LON", help="Override the launch position.")
-@click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
+@float_inputs
 @config_options(
     "likelihood", "engine", "motion", "particles", "seed", "clutter_rate", "p_detect", "toa_sigma_s", "bathymetry"
 )
@@ -276,15 +290,7 @@ def track(
 
 
 @main.command()
-@click.argument("float_file", type=click.Path(path_type=Path))
-@click.option(
-    "--beacons",
-    type=click.Path(path_type=Path),
-    help="Beacon table (default: beacons.csv beside FLOAT_FILE).",
-)
-@click.option("--floats", type=click.Path(path_type=Path), help="Float table (default: floats.csv beside FLOAT_FILE).")
-@click.option("--launch", callback=_parse_launch, metavar="LAT,LON", help="Override the launch position.")
-@click.option("--config", "config_file", type=click.Path(path_type=Path), help="Extra TOML config layer.")
+@float_inputs
 @config_options("likelihood", "engine", "motion", "particles", "seed", "clutter_rate", "p_detect", "toa_sigma_s")
 @click.option("--iterations", type=click.IntRange(min=100), help="[legs] iterations: MCMC iterations of the leg fit.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("out"), show_default=True)

@@ -33,7 +33,10 @@ def mode_labels(lat: NDArray, lon: NDArray, weights: NDArray, link_km: float) ->
     """Mode index (0, 1, ...) of each particle, modes ordered by decreasing mass."""
     ref = int(np.argmax(weights))
     east, north = local_offsets_km(lat, lon, lat[ref], lon[ref])
-    key = np.floor(east / link_km).astype(np.int64) * _KEY + np.floor(north / link_km).astype(np.int64)
+    ix, iy = np.floor(east / link_km).astype(np.int64), np.floor(north / link_km).astype(np.int64)
+    if np.ptp(ix) <= 1 and np.ptp(iy) <= 1:  # at most 2 x 2 cells: all touch, one mode
+        return np.zeros(len(weights), dtype=np.intp)
+    key = ix * _KEY + iy
     cells, cell_of = np.unique(key, return_inverse=True)
     rows, cols = [], []
     for dx, dy in _NEIGHBOURS:

@@ -111,7 +111,7 @@ class CalibrateConfig:
     enabled: bool = setting()
     first_pass_toa_sigma_s: float = setting("> 0", _positive)
     iterations: int = setting("between 1 and 5", lambda v: 1 <= v <= 5)
-    particles: int = setting("between 2 and 10000000", lambda v: 2 <= v <= 10_000_000)
+    max_particles: int = setting("between 2 and 10000000", lambda v: 2 <= v <= 10_000_000)
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from .tracker import Tracker, TrackOutput
 
 def first_pass_config(config: Config, explicit: Set[tuple[str, str]]) -> Config:
     """The robust first pass: the TOA noise sd widened (unless the user set it), no
-    calibration, `[calibrate] particles` (`calibration_pass`)."""
+    calibration, `[calibrate] max_particles` (`calibration_pass`)."""
     sigma = config.model.toa_sigma_s
     if ("model", "toa_sigma_s") not in explicit:
         sigma = max(sigma, config.calibrate.first_pass_toa_sigma_s)
@@ -39,8 +39,8 @@ def first_pass_config(config: Config, explicit: Set[tuple[str, str]]) -> Config:
 
 
 def calibration_pass(config: Config) -> Config:
-    """A pass that feeds calibration: at most `[calibrate] particles` particles."""
-    return with_overrides(config, filter={"particles": min(config.filter.particles, config.calibrate.particles)})
+    """A pass that feeds calibration: at most `[calibrate] max_particles` particles."""
+    return with_overrides(config, filter={"particles": min(config.filter.particles, config.calibrate.max_particles)})
 
 
 def track_record(

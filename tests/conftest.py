@@ -7,9 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
+from support import simulated_mission_dir
 
-from rafostrack.cli import main
 from rafostrack.config import load_config
 from rafostrack.scenarios import synthetic_scenario
 from rafostrack.simulate import SimulatedMission, simulate_mission
@@ -19,12 +18,7 @@ from rafostrack.simulate import SimulatedMission, simulate_mission
 def sim_mission_dir(tmp_path_factory) -> Path:
     """A small simulated mission directory (one float, `sim1`, 20 days) tracked with 200
     particles (its rafostrack.toml says so). Copy it before changing it."""
-    out = tmp_path_factory.mktemp("mission")
-    result = CliRunner().invoke(main, ["simulate", str(out), "--days", "20", "--seed", "3"])
-    assert result.exit_code == 0, result.output
-    with open(out / "rafostrack.toml", "a") as fh:
-        fh.write("\n[filter]\nparticles = 200\n")
-    return out
+    return simulated_mission_dir(tmp_path_factory.mktemp("mission"), seed=3)
 
 
 @pytest.fixture(scope="session")

@@ -59,6 +59,20 @@ def daily_rows(start: str, days: int, toas: str = "100,700") -> str:
     return "time,toa_s\n" + "\n".join(rows) + "\n"
 
 
+def simulated_mission_dir(out: Path, seed: int, days: int = 20, particles: int = 200) -> Path:
+    """`rafostrack simulate` into `out` (one synthetic float), tracked with `particles`
+    particles (written to its rafostrack.toml)."""
+    from click.testing import CliRunner
+
+    from rafostrack.cli import main
+
+    result = CliRunner().invoke(main, ["simulate", str(out), "--days", str(days), "--seed", str(seed)])
+    assert result.exit_code == 0, result.output
+    with open(out / "rafostrack.toml", "a") as fh:
+        fh.write(f"\n[filter]\nparticles = {particles}\n")
+    return out
+
+
 def copy_mission(mission: Path, dest: Path) -> Path:
     shutil.copytree(mission, dest)
     return dest

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from click.testing import CliRunner
+from support import simulated_mission_dir
 
 from rafostrack.cli import main
 from rafostrack.config import load_config
@@ -19,12 +20,7 @@ from rafostrack.legs.floats import leg_prior
 @pytest.fixture(scope="module")
 def mission(tmp_path_factory):
     """20 simulated days (seed 1: a float the smoother tracks within a few km), 200 particles."""
-    out = tmp_path_factory.mktemp("legs_mission")
-    result = CliRunner().invoke(main, ["simulate", str(out), "--days", "20", "--seed", "1"])
-    assert result.exit_code == 0, result.output
-    with open(out / "rafostrack.toml", "a") as fh:
-        fh.write("\n[filter]\nparticles = 200\n")
-    return out
+    return simulated_mission_dir(tmp_path_factory.mktemp("legs_mission"), seed=1)
 
 
 @pytest.fixture(scope="module")

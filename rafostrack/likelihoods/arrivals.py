@@ -150,9 +150,11 @@ class LabelledArrivals(ArrivalLikelihood):
         label_index = np.array(
             [column[self._beacon_row[b]] if b is not None else -1 for b in window.beacon_id], dtype=np.intp
         )
-        p_match = np.zeros((len(particles), len(rows), window.n_signals))
         labelled = np.flatnonzero(label_index >= 0)
-        p_match[:, label_index[labelled], labelled] = 1.0
+        p_match = None
+        if marginals:
+            p_match = np.zeros((len(particles), len(rows), window.n_signals))
+            p_match[:, label_index[labelled], labelled] = 1.0
         nearest = np.full(window.n_signals, 0.0)
         if len(labelled):
             resid = window.toa_s[labelled][None, :] - mu[:, label_index[labelled]]
