@@ -157,10 +157,16 @@ def _track_at(
     return np.interp(t, nodes, lat), (np.interp(t, nodes, unwrapped) + 180.0) % 360.0 - 180.0
 
 
-def _corrected_beacons(beacons: BeaconTable, heard: NDArray[np.intp], fit: kalman.KalmanFit) -> BeaconTable:
+def _corrected_beacons(
+    beacons: BeaconTable, heard: NDArray[np.intp], fit: kalman.KalmanFit, speeds_fitted: bool
+) -> BeaconTable:
+    """The beacon table with the fitted offset and drift corrections, and the fitted sound
+    speeds when `speeds_fitted` (not when the user set the sound speed)."""
     offset, drift = beacons.offset_s.copy(), beacons.drift_s_per_day.copy()
     offset[heard] += fit.offset_s
     drift[heard] += fit.drift_s_per_day
+    if not speeds_fitted:
+        return dataclasses.replace(beacons, offset_s=offset, drift_s_per_day=drift)
     speeds = np.full(len(beacons), np.nan) if beacons.sound_speed_m_s is None else beacons.sound_speed_m_s.copy()
     speeds[heard] = fit.beacon_sound_speed_m_s
     return dataclasses.replace(beacons, offset_s=offset, drift_s_per_day=drift, sound_speed_m_s=speeds)
@@ -236,7 +242,10 @@ def calibrate(
     start = kalman.Hyper(
         motion.velocity_sd_km_per_day, motion.decorrelation_days, model.toa_sigma_s, INITIAL_CLOCK_RATE_SD_S_PER_DAY
     )
-    fit = kalman.fit(problem, start, weight_of, mid)
+    # A sound speed the user set is held: its corrections get a prior sd of 1 mm/s.
+    speeds_fitted = ("model", "sound_speed_m_s") not in explicit
+    priors = kalman.KalmanPriors() if speeds_fitted else kalman.KalmanPriors(1e-3, 1e-3)
+    fit = kalman.fit(problem, start, weight_of, mid, priors=priors)
     hyper = fit.hyper
     values: dict[tuple[str, str], float] = {
         ("model", "sound_speed_m_s"): round(fit.sound_speed_m_s, 2),
@@ -250,11 +259,12 @@ def calibrate(
             hyper.velocity_sd_km_per_day * float(np.sqrt(2 * hyper.decorrelation_days)), 3
         ),
     }
-    corrected = _corrected_beacons(beacons, heard, fit)
+    corrected = _corrected_beacons(beacons, heard, fit, speeds_fitted)
     clocked = dataclasses.replace(info, clock_residual=(problem.time, fit.clock_s))
     timed = _with_values(config, values, explicit).model
     p, r50, detection_report = _detection(estimate, record, corrected, clocked, timed)
-    if beacons.p_detect is None and beacons.detection_range_km is None:
+    detection_set = explicit & {("model", "p_detect"), ("model", "detection_range_km")}
+    if beacons.p_detect is None and beacons.detection_range_km is None and not detection_set:
         corrected = dataclasses.replace(corrected, p_detect=p, detection_range_km=r50)
     lat, lon = _track_at(record, problem.time, fit.lat, fit.lon)
     position_sd = float(np.median(np.sqrt(0.5 * np.trace(fit.position_cov_km2, axis1=1, axis2=2))))

@@ -12,7 +12,9 @@ E-step: per window, the exact association marginals at x (`engines.exact`: P(sig
     (`model.toa_logpdf`), r = T_j - mu_i; and the delay's posterior mean given it was
     delayed, E[d | r] = m + sigma phi(m / sigma) / Phi(m / sigma), m = r - sigma^2 / tau
     (a Gaussian error plus an Exp(mean tau) delay, truncated to d > 0).
-M-step: eps = E[#delayed] / E[#first arrivals]; tau = E[sum of delays] / E[#delayed];
+M-step: eps = E[#delayed] / E[#first arrivals]; tau = E[sum of delays] / E[#delayed], the
+    delays of multipath and of echoes alike (the model gives both the same Exp(tau); an
+    echo's delay is from its beacon's first arrival, at that arrival's expected time);
     e = E[#echoes] / E[#first arrivals whose echo could have been stored], an echo of a
     first arrival at T_j being stored only before the horizon h: weight G(h - T_j);
     clutter rate from the clutter probabilities (`noise.fit_clutter_rate`).
@@ -86,12 +88,18 @@ def fit_association(
             delay = np.clip(_delay_mean(resid, sigma_e, fitted.multipath_delay_s), 0.0, None)
             delay_sum += float(np.sum(p_first * p_delayed * delay))
             echoes += p_echo.sum()
+            # An echo of beacon i at T_j is delayed from i's first arrival, taken at its
+            # expected time under the marginals; its delay informs tau as multipath's does.
+            heard = p_first.sum(axis=1)
+            first_toa = (p_first @ window.toa_s) / np.where(heard > 0, heard, 1.0)
+            echo_delay = np.clip(window.toa_s[None, :] - first_toa[:, None], 0.0, None)
+            delay_sum += float(np.sum(p_echo * echo_delay))
             stored = -np.expm1(-np.clip(h - window.toa_s, 0.0, None) / fitted.multipath_delay_s)  # G(h - T_j)
             echo_chances += float(np.sum(p_first * stored[None, :]))
             p_clutter[at : at + window.n_signals] = assoc.p_clutter[0]
             at += window.n_signals
         eps = float(np.clip(delayed / max(first, 1e-9), MIN_FRACTION, 0.5))
-        tau = float(np.clip(delay_sum / max(delayed, 1e-9), 5.0, 200.0))
+        tau = float(np.clip(delay_sum / max(delayed + echoes, 1e-9), 5.0, 200.0))
         echo = float(np.clip(echoes / max(echo_chances, 1e-9), MIN_FRACTION, 0.5))
         clutter = max(fit_clutter_rate(p_clutter, record, info), 0.05)
         fitted = dataclasses.replace(

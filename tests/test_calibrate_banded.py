@@ -1,0 +1,95 @@
+"""calibrate.banded.BorderedBanded against dense numpy linear algebra (the oracle): solves,
+log-determinants and the selected inverse of random SPD bordered-banded matrices."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import sparse
+
+from rafostrack.calibrate.banded import BorderedBanded
+
+# (band unknowns n, half-bandwidth b, border size m): narrow and wide bands, no border, a
+# border larger than the band, and the smoother's own layout (6 unknowns a node, b = 11).
+CASES = [(30, 1, 0), (30, 1, 3), (40, 3, 5), (25, 6, 12), (60, 11, 9), (12, 11, 2), (50, 0, 4)]
+
+
+def _bordered_banded(n: int, b: int, m: int, seed: int) -> np.ndarray:
+    """A dense SPD N = [[B, C], [C', E]] with B of half-bandwidth exactly b: B = L L' + I
+    (L lower banded), C random, E = C' B^-1 C + S (S SPD), so the Schur complement is S.
+    Scaled unevenly, as a normal matrix of mixed units is."""
+    rng = np.random.default_rng(seed)
+    low = np.tril(np.triu(rng.normal(size=(n, n)), -b))
+    band = low @ low.T + np.eye(n)
+    border = rng.normal(size=(n, m))
+    s = rng.normal(size=(m, m))
+    corner = border.T @ np.linalg.solve(band, border) + s @ s.T + 0.5 * np.eye(m)
+    dense = np.block([[band, border], [border.T, corner]])
+    scale = np.exp(rng.uniform(-3.0, 3.0, n + m))
+    return scale[:, None] * dense * scale[None, :]
+
+
+def _factor(dense: np.ndarray, n: int, b: int, fmt: str = "csr") -> BorderedBanded:
+    return BorderedBanded(sparse.csr_matrix(dense).asformat(fmt), n, b)
+
+
+@pytest.mark.parametrize(("n", "b", "m"), CASES)
+def test_solve_and_log_det_match_dense_numpy(n, b, m):
+    dense = _bordered_banded(n, b, m, seed=n + 7 * b + 31 * m)
+    assert np.abs(np.tril(dense[:n, :n], -b - 1)).max(initial=0.0) == 0.0
+    assert b == 0 or np.abs(np.diag(dense[:n, :n], -b)).min() > 0  # the band is really b wide
+    factor = _factor(dense, n, b)
+    rng = np.random.default_rng(1)
+    rhs = rng.normal(size=n + m)
+    want = np.linalg.solve(dense, rhs)
+    got = factor.solve(rhs)
+    assert np.linalg.norm(got - want) <= 1e-9 * np.linalg.norm(want)
+    # Several right-hand sides at once (columns).
+    many = rng.normal(size=(n + m, 4))
+    want_many = np.linalg.solve(dense, many)
+    assert np.linalg.norm(factor.solve(many) - want_many) <= 1e-9 * np.linalg.norm(want_many)
+    sign, log_det = np.linalg.slogdet(dense)
+    assert sign == 1.0
+    assert factor.log_det() == pytest.approx(log_det, rel=1e-10, abs=1e-9)
+
+
+@pytest.mark.parametrize(("n", "b", "m"), CASES)
+def test_selected_inverse_matches_dense_inverse(n, b, m):
+    dense = _bordered_banded(n, b, m, seed=100 + n + 7 * b + 31 * m)
+    factor = _factor(dense, n, b, fmt="coo")
+    band_inverse = np.linalg.inv(dense[:n, :n])
+    full_inverse = np.linalg.inv(dense)
+    # The band of B^-1, lower form: z[d, j] = (B^-1)[j + d, j] for j + d < n.
+    z = factor.band_of_inverse()
+    assert z.shape == (b + 1, n)
+    for d in range(b + 1):
+        want = np.diag(band_inverse, -d)
+        np.testing.assert_allclose(z[d, : n - d], want, rtol=1e-8, atol=1e-12 * np.abs(band_inverse).max())
+    # Diagonal blocks of N^-1 at arbitrary starts, for every block size up to b + 1.
+    for size in sorted({1, min(2, b + 1), b + 1}):
+        starts = np.arange(0, n - size + 1, max(1, (n - size) // 7))
+        blocks = factor.diagonal_blocks_of_inverse(starts, size)
+        want = np.stack([full_inverse[s : s + size, s : s + size] for s in starts])
+        np.testing.assert_allclose(blocks, want, rtol=1e-8, atol=1e-12 * np.abs(full_inverse).max())
+
+
+def test_duplicate_sparse_entries_are_summed_and_upper_band_entries_ignored():
+    """The factor reads B from the lower triangle and C from the upper-right block of the
+    sparse matrix, summing duplicate (row, col) entries as scipy does."""
+    n, b, m = 20, 2, 3
+    dense = _bordered_banded(n, b, m, seed=5)
+    coo = sparse.coo_matrix(dense)
+    half = 0.5 * coo.data
+    twice = sparse.coo_matrix(
+        (np.concatenate([half, half]), (np.concatenate([coo.row, coo.row]), np.concatenate([coo.col, coo.col]))),
+        shape=dense.shape,
+    )
+    rhs = np.random.default_rng(2).normal(size=n + m)
+    got = BorderedBanded(twice, n, b).solve(rhs)
+    np.testing.assert_allclose(got, np.linalg.solve(dense, rhs), rtol=1e-9)
+
+
+def test_a_matrix_wider_than_the_stated_band_is_refused():
+    dense = _bordered_banded(15, 3, 2, seed=9)
+    with pytest.raises(ValueError, match="not banded"):
+        _factor(dense, 15, 2)
