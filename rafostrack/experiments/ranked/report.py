@@ -47,9 +47,11 @@ def build_report(
         "**The paper's setting on rafostrack** (Figs. 4, 5, 6b and the BP panel): " + PaperSetting().describe() + ". "
         "The target's daily truth track is given explicitly and its arrivals are drawn by "
         "`rafostrack.simulate.simulate_arrivals` (the package's generative model); the tracker (`track_record`) "
-        "uses the simulation's model settings, a random walk whose sd per axis per day equals the target's daily "
-        "step, and no end fix. 'Filtered' is the paper's estimate (particle filter); 'smoothed' is ours "
-        "(forward filter, backward smoothing). 'Ranked, exact' uses our exact association sum, 'ranked, BP' the "
+        "uses the simulation's model settings (no calibration needed), its default drift model (integrated "
+        "Ornstein-Uhlenbeck, velocity sd equal to the target's daily step) with lost-track recovery, and no end "
+        "fix (the paper's random walk without recovery loses the Fig. 5 spiral at 1000 particles). 'Filtered' is "
+        "the paper's kind of estimate (the particle filter's); 'smoothed' is ours (forward filter, backward "
+        "smoothing). 'Ranked, exact' uses our exact association sum, 'ranked, BP' the "
         "paper's loopy BP, 'unranked' the baseline of eq. 19, 'labelled' the true labels (eq. 20).",
         "",
         "Figs. 7, 8 and 12 use the sample mission in `data/samples/`: real DIMES geometry, **simulated** arrival "

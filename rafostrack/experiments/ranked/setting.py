@@ -135,9 +135,11 @@ class PaperSetting:
         seed: int = 0,
         smooth: bool = True,
     ) -> Config:
-        """The tracker's configuration: the paper's method (its random-walk motion, eq. 1; one
-        pass with the known model, no calibration, no lost-track recovery), with the model
-        matching the simulation's."""
+        """The tracker's configuration: rafostrack's method with the measurement model known
+        (matching the simulation's, so no calibration): the default drift model (integrated
+        OU, its velocity sd the target's daily step) and lost-track recovery. (The paper's
+        random walk without recovery loses the Fig. 5 spiral at 1000 particles: 170 km RMSE
+        on seed 0.)"""
         return with_overrides(
             load_config(),
             model={
@@ -151,9 +153,12 @@ class PaperSetting:
                 "window_s": self.window_s,
                 "max_signals": self.max_signals,
             },
-            motion={"model": "random_walk", "diffusion_km_per_day": float(diffusion_km_per_day)},
+            motion={
+                "diffusion_km_per_day": float(diffusion_km_per_day),
+                "velocity_sd_km_per_day": float(diffusion_km_per_day),
+            },
             calibrate={"enabled": False},
-            recovery={"enabled": False},
+            recovery={"enabled": True},
             fixes={"launch_sd_km": self.launch_sd_km, "use_end_fix": False},
             filter={**method_overrides(method), "particles": int(particles), "seed": int(seed)},
             smoother={"enabled": bool(smooth)},
