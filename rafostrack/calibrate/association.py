@@ -63,14 +63,20 @@ def fit_association(
     track (lat, lon: one position per window of `record`), and a report of them."""
     sigma_e = float(np.hypot(model.toa_sigma_s, position_sd_km / KM_PER_S))
     fitted = model
-    windows = [(w, la, lo) for w, la, lo in zip(record.windows, lat, lon, strict=True) if w.n_signals]
+    # The predictions at the track (arrival times, detection) do not change with the fitted
+    # parameters: computed once.
+    e_model = dataclasses.replace(fitted, toa_sigma_s=sigma_e)
+    windows = [
+        (w, *m.window_prediction(beacons, info, e_model, np.array([la]), np.array([lo]), w.time)[1:])
+        for w, la, lo in zip(record.windows, lat, lon, strict=True)
+        if w.n_signals
+    ]
     p_clutter = np.zeros(sum(w.n_signals for w, _, _ in windows))
     for _ in range(ITERATIONS):
         e_model = dataclasses.replace(fitted, toa_sigma_s=sigma_e)
         first = delayed = delay_sum = echoes = echo_chances = 0.0
         at = 0
-        for window, la, lo in windows:
-            _, mu, p_detect = m.window_prediction(beacons, info, e_model, np.array([la]), np.array([lo]), window.time)
+        for window, mu, p_detect in windows:
             h = m.horizon_s(window.toa_s, info.max_signals, info.window_s)
             f = m.association_factors(
                 mu, p_detect, window.toa_s, max_signals=info.max_signals, window_s=info.window_s, model=e_model
