@@ -96,8 +96,8 @@ def section_trajectory(s: dict[str, Any], paper_says: str) -> list[str]:
         f"| {_pct(lost['unranked_filtered'])} |",
         f"| labelled, filtered | {_g(mse['labeled_filtered'])} | {_f(rmse['labeled_filtered'], 1)} | |",
         "",
-        f"{s['days']} daily steps of {s['step_km']} km (tracker drift velocity sd {s['diffusion_km_per_day']} km/day per "
-        f"axis), clutter Poisson({s['clutter_rate']:g}), {s['particles']} particles, seed {s['seed']}; "
+        f"{s['days']} daily steps of {s['step_km']} km (tracker drift velocity sd {s['diffusion_km_per_day']} "
+        f"km/day per axis), clutter Poisson({s['clutter_rate']:g}), {s['particles']} particles, seed {s['seed']}; "
         f"{_f(s['stored_per_window'], 2)} TOAs stored per window, {_pct(s['clutter_fraction'])} of them clutter, "
         f"{_pct(s['frac_windows_lt3_true'])} of windows with < 3 true signals; ambiguous windows flagged: "
         f"{s['ambiguous_windows']['exact_smoothed']} smoothed, {s['ambiguous_windows']['exact_filtered']} filtered. "
@@ -227,8 +227,8 @@ def section_fig6b(s: dict[str, Any]) -> list[str]:
         )
     out += [
         "",
-        f"Straight line of {s['days']} steps of {s['step_km']} km, tracker drift velocity sd {s['diffusion_km_per_day']} "
-        f"km/day per axis, {s['particles']} particles, seeds {s['seed']}..{s['seed'] + R - 1}. Data: {_csvs(s)}.",
+        f"Straight line of {s['days']} steps of {s['step_km']} km, tracker drift velocity sd "
+        f"{s['diffusion_km_per_day']} km/day per axis, {s['particles']} particles, seeds {s['seed']}..{s['seed'] + R - 1}. Data: {_csvs(s)}.",
     ]
     return out
 
