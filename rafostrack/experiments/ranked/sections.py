@@ -228,7 +228,8 @@ def section_fig6b(s: dict[str, Any]) -> list[str]:
     out += [
         "",
         f"Straight line of {s['days']} steps of {s['step_km']} km, tracker drift velocity sd "
-        f"{s['diffusion_km_per_day']} km/day per axis, {s['particles']} particles, seeds {s['seed']}..{s['seed'] + R - 1}. Data: {_csvs(s)}.",
+        f"{s['diffusion_km_per_day']} km/day per axis, {s['particles']} particles, "
+        f"seeds {s['seed']}..{s['seed'] + R - 1}. Data: {_csvs(s)}.",
     ]
     return out
 
