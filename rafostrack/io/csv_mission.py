@@ -26,6 +26,7 @@ from .csv_table import (
     require_present,
     time_text,
 )
+from .records import check_after_launch
 
 # A stretch longer than this with no window that has an active beacon and a stored TOA is
 # warned about (the track there follows the drift model only).
@@ -193,13 +194,7 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
             lab = str(frame["beacon_id"].iloc[row])
             hint = nearest(lab, known) or " (expected a beacon_id of the beacons table or empty for clutter)"
             raise InputError(f"{path}: line {lines[row]}: field 'beacon_id': unknown beacon {lab!r}{hint}")
-    first = int(np.argmin(times))
-    if times[first] < info.launch_time:
-        raise InputError(
-            f"{path}: line {lines[first]}: window at {time_text(times[first])} is before the float's "
-            f"launch_time {time_text(info.launch_time)}; field 'time': expected windows at or after the launch "
-            "(check launch_time in floats.csv)"
-        )
+    check_after_launch(path, info, times, lambda i: f"line {lines[i]}", field="field 'time': ")
 
     dup = pd.DataFrame({"t": times, "toa": toa}).duplicated().to_numpy()
     if dup.any():

@@ -19,6 +19,20 @@ from ..errors import InputError, Warnings
 from .csv_table import time_text
 
 
+def check_after_launch(
+    path: Path, info: FloatInfo, times: NDArray[np.datetime64], where: Callable[[int], str], field: str = ""
+) -> None:
+    """InputError naming the earliest window when it is before the float's launch (`where(i)`
+    names entry i: a line, a record; `field` is put before what was expected)."""
+    first = int(np.argmin(times))
+    if times[first] < info.launch_time:
+        raise InputError(
+            f"{path}: {where(first)}: window at {time_text(times[first])} is before the float's launch_time "
+            f"{time_text(info.launch_time)}; {field}expected windows at or after the launch (check launch_time in "
+            "floats.csv)"
+        )
+
+
 def build_record(
     path: Path,
     info: FloatInfo,
@@ -38,12 +52,7 @@ def build_record(
         raise InputError(f"{path}: no listening windows in the file; expected at least one")
     if np.isnat(times).any():
         raise InputError(f"{path}: {where(int(np.argmax(np.isnat(times))))}: window time missing; expected a time")
-    first = int(np.argmin(times))
-    if times[first] < info.launch_time:
-        raise InputError(
-            f"{path}: {where(first)}: window at {time_text(times[first])} is before the float's launch_time "
-            f"{time_text(info.launch_time)}; expected windows at or after the launch (check launch_time in floats.csv)"
-        )
+    check_after_launch(path, info, times, where)
     has = np.isfinite(toa)
     outside = has & ((toa < 0) | (toa > info.window_s))
     if outside.any():
