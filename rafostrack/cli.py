@@ -10,12 +10,15 @@ import sys
 from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from . import __version__
 from .errors import InputError
+
+if TYPE_CHECKING:  # the pipeline is imported when a command runs, not at start-up
+    from .pipeline import TrackInputs
 
 
 def _report_errors(func):
@@ -190,6 +193,29 @@ def main(debug: bool) -> None:
     """Track RAFOS floats from unlabelled, ranked arrival times."""
 
 
+def _track_inputs(
+    float_file: Path,
+    beacons: Path | None,
+    floats: Path | None,
+    launch: tuple[float, float] | None,
+    config_file: Path | None,
+    overrides: dict[str, dict[str, Any]],
+    input_format: str | None = None,
+) -> TrackInputs:
+    """`pipeline.TrackInputs` from the options of `float_inputs`."""
+    from .pipeline import TrackInputs
+
+    return TrackInputs(
+        float_path=float_file,
+        beacons_path=beacons,
+        floats_path=floats,
+        launch=launch,
+        config_files=(config_file,) if config_file else (),
+        overrides=overrides,
+        input_format=input_format,
+    )
+
+
 def float_inputs(command: Callable[..., Any]) -> Callable[..., Any]:
     """The inputs of a one-float command (track, legs): FLOAT_FILE and the tables beside it."""
     for option in reversed(
@@ -253,19 +279,12 @@ def track(
 ):
     """Label every TOA of FLOAT_FILE and estimate the float's track."""
     from .io.output_formats import parse_formats
-    from .pipeline import TrackInputs, track_float
+    from .pipeline import track_float
 
     _refuse_method(method)
     formats = parse_formats(output_format)
-    inputs = TrackInputs(
-        float_path=float_file,
-        beacons_path=beacons,
-        floats_path=floats,
-        launch=launch,
-        config_files=(config_file,) if config_file else (),
-        overrides=_overrides(**flags, smooth=False if no_smooth else None),
-        input_format=input_format,
-    )
+    overrides = _overrides(**flags, smooth=False if no_smooth else None)
+    inputs = _track_inputs(float_file, beacons, floats, launch, config_file, overrides, input_format)
     from . import progress as progress_module
 
     progress = progress_module.progress_for(sys.stderr, label=float_file.stem)
@@ -304,19 +323,11 @@ def legs(float_file, beacons, floats, launch, config_file, iterations, out_dir, 
     legs.parquet, legs_track.parquet, legs.png and legs_run.json to OUT/<float_id>/.
     """
     from .legs.floats import legs_float
-    from .pipeline import TrackInputs
 
     overrides = _overrides(**flags)
     if iterations is not None:
         overrides.setdefault("legs", {})["iterations"] = iterations
-    inputs = TrackInputs(
-        float_path=float_file,
-        beacons_path=beacons,
-        floats_path=floats,
-        launch=launch,
-        config_files=(config_file,) if config_file else (),
-        overrides=overrides,
-    )
+    inputs = _track_inputs(float_file, beacons, floats, launch, config_file, overrides)
     result = legs_float(inputs, out_dir, plots=not no_plots)
     for message in result.run["warnings"]:
         click.echo(f"rafostrack: warning: {message}", err=True)
