@@ -34,7 +34,7 @@ from rafostrack.config import with_overrides
 from rafostrack.domain import Particles
 from rafostrack.evaluate import inside_ellipse, position_errors_km
 from rafostrack.likelihoods import arrivals_from_config
-from rafostrack.pipeline import TrackInputs, load_float, track_float
+from rafostrack.pipeline import LoadedFloat, TrackInputs, load_float, track_float
 from rafostrack.posterior import ELLIPSE_95_SCALE
 from rafostrack.stress import DAY_NS, StressConfig, simulate_stress, write_stress_mission
 from rafostrack.workers import single_threaded_math
@@ -62,14 +62,14 @@ def make_missions(root: Path, n_floats: int, days: int, seed: int) -> list[Path]
     return files
 
 
-def _labels_right(labels: pd.DataFrame, float_file: Path) -> float:
-    loaded = load_float(TrackInputs(float_file, overrides=TRUE_LABELS))
+def _labels_right(labels: pd.DataFrame, loaded: LoadedFloat) -> float:
+    """The fraction of `labels` equal to the true labels of `loaded` (the float read with them)."""
     truth = [b for w in loaded.record.windows for b in (w.beacon_id or (None,) * w.n_signals)]
     est = [b if isinstance(b, str) else None for b in labels["beacon_id"]]
     return float(np.mean([a == b for a, b in zip(est, truth, strict=True)])) if truth else float("nan")
 
 
-def oracle_labels(float_file: Path, events: dict[str, Any], truth: pd.DataFrame) -> float:
+def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFrame) -> float:
     """Labels right when each window is labelled at the TRUE position with the TRUE nuisances
     (per-source sound speed, drift error and detection, the float clock's wander, TOA sd,
     clutter rate, multipath split evenly between replaced and echoed arrivals): the ceiling a
@@ -77,7 +77,6 @@ def oracle_labels(float_file: Path, events: dict[str, Any], truth: pd.DataFrame)
     simulator's delays are lognormal, its noise heavy-tailed, its detection fades in bad
     propagation regimes; the model's are not), but clutter that lands within a few seconds of
     a source's predicted arrival is as ambiguous here as for the tracker."""
-    loaded = load_float(TrackInputs(float_file, overrides=TRUE_LABELS))
     b, info, per = loaded.beacons, loaded.info, events["beacons"]
     ids = list(b.beacon_id)
     beacons = dataclasses.replace(
@@ -129,6 +128,7 @@ def score(task: tuple[Path, Path, tuple[Path, ...]]) -> dict[str, Any]:
         TrackInputs(float_file, config_files=config_files, overrides=TRUE_LABELS), out_root / "labelled", plots=False
     )
     track = ours.output.track
+    labelled = load_float(TrackInputs(float_file, overrides=TRUE_LABELS))  # the true labels
     err = position_errors_km(track, truth)
     ref_err = position_errors_km(ref.output.track, truth)
     status = track["status"].value_counts().to_dict() if "status" in track else {}
@@ -139,8 +139,8 @@ def score(task: tuple[Path, Path, tuple[Path, ...]]) -> dict[str, Any]:
         "rmse_km": float(np.sqrt(np.mean(err**2))),
         "p95_km": float(np.percentile(err, 95)),
         "max_km": float(err.max()),
-        "labels": _labels_right(ours.output.labels, float_file),
-        "labels_oracle": oracle_labels(float_file, events, truth),
+        "labels": _labels_right(ours.output.labels, labelled),
+        "labels_oracle": oracle_labels(labelled, events, truth),
         "cover95": float(np.mean(inside_ellipse(track, truth, ELLIPSE_95_SCALE))),
         "ess_med": float(np.median(ours.output.filter_ess)),
         "ref_rmse_km": float(np.sqrt(np.mean(ref_err**2))),

@@ -171,6 +171,6 @@ def smooth(
     smoothed = []
     for cloud, (_, index), weights in zip(clouds, columns, smoothed_points, strict=True):
         full = np.zeros(len(cloud.weights))
-        np.add.at(full, index, weights)
+        full[index] = weights
         smoothed.append(full)
     return Smoothed(smoothed, [s[:2, :2] for s in spreads])

@@ -244,7 +244,11 @@ def calibrate(
     )
     # A sound speed the user set is held: its corrections get a prior sd of 1 mm/s.
     speeds_fitted = ("model", "sound_speed_m_s") not in explicit
-    priors = kalman.KalmanPriors() if speeds_fitted else kalman.KalmanPriors(1e-3, 1e-3)
+    priors = (
+        kalman.KalmanPriors()
+        if speeds_fitted
+        else kalman.KalmanPriors(sound_speed_m_s=1e-3, beacon_sound_speed_m_s=1e-3)
+    )
     fit = kalman.fit(problem, start, weight_of, mid, priors=priors)
     hyper = fit.hyper
     values: dict[tuple[str, str], float] = {

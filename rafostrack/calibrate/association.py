@@ -36,7 +36,7 @@ from .. import model as m
 from ..config import ModelConfig
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from ..engines import exact
-from .noise import fit_clutter_rate
+from .noise import direct_probability, fit_clutter_rate
 
 KM_PER_S = 1.48  # range per second of arrival time
 ITERATIONS = 8
@@ -85,10 +85,7 @@ def fit_association(
             p_echo = assoc.p_echo[0] if assoc.p_echo is not None else np.zeros_like(assoc.p_match[0])
             p_first = assoc.p_match[0] - p_echo  # (s, K)
             resid = window.toa_s[None, :] - mu[0][:, None]
-            direct = dataclasses.replace(e_model, multipath_fraction=0.0)
-            p_delayed = 1.0 - np.exp(
-                np.log1p(-e_model.multipath_fraction) + m.toa_logpdf(resid, direct) - m.toa_logpdf(resid, e_model)
-            )
+            p_delayed = 1.0 - direct_probability(resid, e_model)
             first += p_first.sum()
             delayed += float(np.sum(p_first * p_delayed))
             delay = np.clip(_delay_mean(resid, sigma_e, fitted.multipath_delay_s), 0.0, None)

@@ -59,19 +59,20 @@ def read_summaries(outdir: Path, names: Sequence[str]) -> dict[str, dict[str, An
 
 def write_report(
     outdir: Path,
+    summaries: dict[str, dict[str, Any]],
+    total_s: float | None,
     *,
     paper: str,
     package: str,
-    quick: bool,
     quick_sizes: str,
     intro: Sequence[str],
     sections: Sequence[tuple[str, Sequence[str]]],
-    seconds: dict[str, float],
-    total_s: float | None,
 ) -> Path:
-    """Write `outdir/REPORT.md`: a title naming `paper`, how the report was generated (the
-    command, version, wall time; in quick mode, that `quick_sizes` were small), the `intro`
-    lines, a table of contents, each (title, lines) section, and the experiments' seconds."""
+    """Write `outdir/REPORT.md` for a paper's experiment `summaries`: a title naming `paper`,
+    how the report was generated (the command, version, wall time; in quick mode, that
+    `quick_sizes` were small), the `intro` lines, a table of contents, each (title, lines)
+    section, and each experiment's seconds."""
+    quick = any(s.get("quick") for s in summaries.values())
     lines = [
         f"# rafostrack: the {paper} experiments, redone",
         "",
@@ -93,7 +94,7 @@ def write_report(
     for title, body in sections:
         lines += ["", f"## {title}", "", *body]
     lines += ["", "## Timings", "", "| experiment | seconds |", "|---|---:|"]
-    lines += [f"| {name} | {value:.1f} |" for name, value in seconds.items()]
+    lines += [f"| {name} | {s['seconds']:.1f} |" for name, s in summaries.items()]
     if total_s is not None:
         lines.append(f"| **total (incl. start-up)** | {total_s:.1f} |")
     lines.append("")

@@ -213,12 +213,11 @@ def build_report(
     ]
     return write_report(
         outdir,
+        summaries,
+        total_s,
         paper="ABC binary-sensor paper's",
         package="abc",
-        quick=any(s.get("quick") for s in summaries.values()),
         quick_sizes="few scenarios and particles",
         intro=intro,
         sections=[(SECTIONS[n][0], SECTIONS[n][1](s)) for n, s in summaries.items() if n in SECTIONS],
-        seconds={name: s["seconds"] for name, s in summaries.items()},
-        total_s=total_s,
     )

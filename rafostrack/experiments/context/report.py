@@ -163,12 +163,11 @@ def build_report(
     ]
     return write_report(
         outdir,
+        summaries,
+        total_s,
         paper="context-driven tracking paper's",
         package="context",
-        quick=any(s.get("quick") for s in summaries.values()),
         quick_sizes="few repetitions and particles",
         intro=intro,
         sections=sections,
-        seconds={name: s["seconds"] for name, s in summaries.items()},
-        total_s=total_s,
     )

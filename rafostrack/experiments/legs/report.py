@@ -177,12 +177,11 @@ def build_report(
     ]
     return write_report(
         outdir,
+        summaries,
+        total_s,
         paper="random-walk leg paper's",
         package="legs",
-        quick=any(s.get("quick") for s in summaries.values()),
         quick_sizes="few repeats and iterations",
         intro=intro,
         sections=[(SECTIONS[n][0], SECTIONS[n][1](summaries[n])) for n in ORDER if n in summaries],
-        seconds={name: s["seconds"] for name, s in summaries.items()},
-        total_s=total_s,
     )
