@@ -126,6 +126,7 @@ class FixesConfig:
 @dataclass(frozen=True)
 class SmootherConfig:
     enabled: bool = setting()
+    two_filter: bool = setting()
 
 
 @dataclass(frozen=True)

@@ -74,6 +74,7 @@ class FilterResult:
     warnings: list[str]
     n_checks: int = 0  # windows the recovery monitor searched
     n_reseeds: int = 0  # windows where it re-seeded part of the cloud
+    prior: Cloud | None = None  # the particles drawn about the starting fix, equally weighted
 
 
 @dataclass(frozen=True)
@@ -154,6 +155,7 @@ class ParticleFilter:
         n = self.settings.particles
         particles = self.motion.initial(launch.lat, launch.lon, launch.sd_km, n, rng)
         log_w = np.zeros(n)
+        prior = Cloud(launch.time, particles, np.full(n, 1.0 / n))
         t_prev = launch.time
         kept: list[Step] = []
         warnings: list[str] = []
@@ -209,7 +211,7 @@ class ParticleFilter:
             particles, log_w = self.settings.resample(moved, weights, rng)
             n_resamples += particles is not moved
         checks = (monitor.n_checks, monitor.n_reseeds) if monitor is not None else (0, 0)
-        return FilterResult(kept, len(events), n_resamples, warnings, *checks)
+        return FilterResult(kept, len(events), n_resamples, warnings, *checks, prior=prior)
 
     def _evaluate(self, particles: Particles, obs: Observation) -> Evidence:
         if isinstance(obs, Window):

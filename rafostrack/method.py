@@ -39,8 +39,11 @@ def first_pass_config(config: Config, explicit: Set[tuple[str, str]]) -> Config:
 
 
 def calibration_pass(config: Config) -> Config:
-    """A pass that feeds calibration: at most `[calibrate] max_particles` particles."""
-    return with_overrides(config, filter={"particles": min(config.filter.particles, config.calibrate.max_particles)})
+    """A pass that feeds calibration: at most `[calibrate] max_particles` particles, smoothed
+    by FFBSm alone (no backward filter: its track and labels, not the reported posterior,
+    are what it gives)."""
+    particles = min(config.filter.particles, config.calibrate.max_particles)
+    return with_overrides(config, filter={"particles": particles}, smoother={"two_filter": False})
 
 
 def track_record(

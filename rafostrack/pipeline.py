@@ -274,6 +274,7 @@ def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, el
         "engine": loaded.config.filter.engine,
         "motion": loaded.config.motion.model,
         "estimate": output.estimate.kind,
+        "smoother": output.smoother,
         "inputs": {k: {"path": str(p), "sha256": file_digest(p)} for k, p in files.items()},
         "config_files": [str(p) for p in inputs.config_layers()],
         "config": loaded.config.to_dict(),

@@ -35,7 +35,7 @@ from .smoother_kernel import backward_kernel
 
 # Particles whose weight is below this fraction of the largest weight are left out of the
 # O(N^2) products; their contribution is below float64 resolution of the result.
-_PRUNE = 1e-14
+PRUNE = 1e-14
 # Transition sd floor (km) for steps at the same instant (e.g. a fix at a window's time),
 # where the particles are copies: a 1 m kernel links each copy to its own ancestor.
 _MIN_SD_KM = 1e-3
@@ -48,13 +48,31 @@ MAX_ROWS = 512
 MAX_COLUMNS = 2000
 
 
-def _plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon: float) -> NDArray[np.float64]:
+def plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon: float) -> NDArray[np.float64]:
     """(n, d) tangent-plane states about (ref_lat, ref_lon): east, north km [, velocity]."""
     east, north = local_offsets_km(cloud.lat[index], cloud.lon[index], ref_lat, ref_lon)
     columns = [east, north]
     if cloud.particles.velocity_km_per_day is not None:
         columns += list(cloud.particles.velocity_km_per_day[index].T)
     return np.column_stack(columns)
+
+
+def whitened(
+    components: list[tuple[float, LinearGaussian]], origins: NDArray[np.float64], destinations: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The compiled kernels' inputs for a mixture of transitions sum_c w_c N(x'; A_c x + b_c,
+    Q_c): za (C, I, d) = W_c A_c x_i for the origins, zb (C, J, d) = W_c (x'_j - b_c) for the
+    destinations, n_c = log w_c + log|W_c| - d/2 log 2 pi, with W_c the whitening of Q_c, so
+    that log f_c(x'_j | x_i) = n_c - |zb_cj - za_ci|^2 / 2."""
+    za, zb, log_norm = [], [], []
+    for weight, kernel in components:
+        if weight <= 0:
+            continue
+        white = kernel.whitening(_MIN_SD_KM)
+        za.append(np.einsum("kl,lm,im->ik", white, kernel.A, origins))
+        zb.append(np.einsum("kl,jl->jk", white, destinations - kernel.b))
+        log_norm.append(np.log(weight) + float(np.linalg.slogdet(white)[1]) - 0.5 * kernel.dim * _LOG_2PI)
+    return np.ascontiguousarray(za), np.ascontiguousarray(zb), np.array(log_norm)
 
 
 def backward_step(
@@ -70,24 +88,15 @@ def backward_step(
     represented by `max_rows` equal-weight quantile points (`resampling.quantile_points`):
     O(N max_rows) per step instead of O(N^2), the smoothed weight of every particle of `now`
     still computed."""
-    keep_i = np.flatnonzero(now.weights > _PRUNE * now.weights.max())
-    rows, v = quantile_points(smoothed_next, max_rows, _PRUNE)
+    keep_i = np.flatnonzero(now.weights > PRUNE * now.weights.max())
+    rows, v = quantile_points(smoothed_next, max_rows, PRUNE)
     ref = rows[np.argmax(v)]
     ref_lat, ref_lon = float(nxt.lat[ref]), float(nxt.lon[ref])
-    xa = _plane_states(now, keep_i, ref_lat, ref_lon)
-    xb = _plane_states(nxt, rows, ref_lat, ref_lon)
-    za, zb, log_norm = [], [], []
-    for weight, kernel in components:
-        if weight <= 0:
-            continue
-        white = kernel.whitening(_MIN_SD_KM)
-        za.append(np.einsum("kl,lm,im->ik", white, kernel.A, xa))
-        zb.append(np.einsum("kl,jl->jk", white, xb - kernel.b))
-        log_norm.append(np.log(weight) + float(np.linalg.slogdet(white)[1]) - 0.5 * kernel.dim * _LOG_2PI)
-    out = np.empty(len(keep_i))
-    backward_kernel(
-        np.ascontiguousarray(za), np.ascontiguousarray(zb), np.array(log_norm), np.log(now.weights[keep_i]), v, out
+    za, zb, log_norm = whitened(
+        components, plane_states(now, keep_i, ref_lat, ref_lon), plane_states(nxt, rows, ref_lat, ref_lon)
     )
+    out = np.empty(len(keep_i))
+    backward_kernel(za, zb, log_norm, np.log(now.weights[keep_i]), v, out)
     result = np.zeros_like(now.weights)
     result[keep_i] = out
     return result / result.sum()
@@ -102,16 +111,17 @@ def silverman_bandwidth(n: int, dim: int) -> float:
 def cloud_covariance(cloud: Cloud) -> NDArray[np.float64]:
     """Weighted covariance (d, d) of a cloud's tangent-plane states (km; km/day)."""
     ref = int(np.argmax(cloud.weights))
-    states = _plane_states(cloud, np.arange(len(cloud.weights)), float(cloud.lat[ref]), float(cloud.lon[ref]))
+    states = plane_states(cloud, np.arange(len(cloud.weights)), float(cloud.lat[ref]), float(cloud.lon[ref]))
     w = cloud.weights / cloud.weights.sum()
     d = states - np.einsum("p,pk->k", w, states)
     return np.einsum("p,pi,pj->ij", w, d, d)
 
 
-def regularised(kernel: LinearGaussian, spread: NDArray[np.float64]) -> LinearGaussian:
+def regularised(kernel: LinearGaussian, spread: NDArray[np.float64], *, at_destination: bool = False) -> LinearGaussian:
     """The transition from a particle smeared by a Gaussian kernel of covariance `spread`:
-    integral of N(x'; A s + b, Q) N(s; s_i, spread) ds = N(x'; A s_i + b, Q + A spread A^T)."""
-    q = kernel.Q + kernel.A @ spread @ kernel.A.T
+    integral of N(x'; A s + b, Q) N(s; s_i, spread) ds = N(x'; A s_i + b, Q + A spread A^T);
+    `at_destination`: to a smeared particle, N(x'_j; A x + b, Q + spread)."""
+    q = kernel.Q + (spread if at_destination else kernel.A @ spread @ kernel.A.T)
     values, vectors = np.linalg.eigh(0.5 * (q + q.T))
     return LinearGaussian(kernel.A, kernel.b, vectors * np.sqrt(np.clip(values, 0.0, None)))
 
@@ -125,7 +135,7 @@ class Smoothed:
     kernel_cov_km2: list[NDArray[np.float64]]
 
 
-def _columns(cloud: Cloud, max_columns: int) -> tuple[Cloud, NDArray[np.intp]]:
+def column_points(cloud: Cloud, max_columns: int) -> tuple[Cloud, NDArray[np.intp]]:
     """The cloud on at most `max_columns` of its particles (quantile points of its weights),
     and their indices."""
     if len(cloud.weights) <= max_columns:
@@ -151,13 +161,13 @@ def smooth(
     weighted particles' plus h^2 Sigma_t (`Smoothed.kernel_cov_km2`, the position block).
 
     A cloud of more than `max_columns` particles is smoothed on `max_columns` quantile points
-    of its filter weights (`_columns`): a filter of many particles holds more of the
+    of its filter weights (`column_points`): a filter of many particles holds more of the
     posterior's modes through the forward pass, and its backward pass costs no more than
     `max_columns` x `MAX_ROWS` per step.
     """
     if not clouds:
         return Smoothed([], [])
-    columns = [_columns(c, max_columns) for c in clouds]
+    columns = [column_points(c, max_columns) for c in clouds]
     points = [cloud for cloud, _ in columns]
     smoothed_points = [np.empty(0)] * len(points)
     smoothed_points[-1] = points[-1].weights / points[-1].weights.sum()

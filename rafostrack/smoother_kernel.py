@@ -13,6 +13,9 @@ sum. A further kernel (broad: a jump component) enters row j only where its peak
 exp(n_c) could add more than `MIXTURE_TOL` of pred_j; elsewhere its share is below that
 (module `smoother`). Then S_i += V_j exp(r_i - log pred_j). Every sum runs in one fixed
 order: the same bits on every run.
+
+`log_mixture_density` evaluates such a mixture itself, log sum_c sum_i W_i f_c(x_j | x_i) at
+points x_j (the two-filter smoother's predictive densities, `rafostrack.two_filter`).
 """
 
 from __future__ import annotations
@@ -23,8 +26,6 @@ import numpy as np
 from numba import njit
 
 MIXTURE_TOL = 1e-4
-# exp(-48) < 1e-20: terms this far below a row's largest are left out of its sums.
-NEGLIGIBLE = -48.0
 # exp(-48) < 1e-20: terms this far below a row's largest are left out of its sums.
 NEGLIGIBLE = -48.0
 
@@ -95,3 +96,24 @@ def backward_kernel(za, zb, log_norm, log_w, v, out):  # pragma: no cover - comp
         scale = v[j] / total
         for i in range(n_i):
             out[i] += scale * row[i]
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def log_mixture_density(za, zb, log_norm, log_w, out):  # pragma: no cover - compiled
+    """out_j = log sum_c sum_i exp(log W_i + n_c - |zb_cj - za_ci|^2 / 2): the log density at
+    points j of the weighted mixture of kernels about points i (za (C, I, d), zb (C, J, d),
+    log_norm (C,), log_w (I,) -> out (J,)). The squared distance is symmetric in i and j,
+    so the same kernel sums over a transition's origins or over its destinations."""
+    n_comp, n_i = za.shape[0], za.shape[1]
+    rows = np.empty((n_comp, n_i))
+    for j in range(zb.shape[1]):
+        top = -np.inf
+        for c in range(n_comp):
+            top = max(top, _row(za, zb, log_norm, log_w, c, j, rows[c]))
+        if top == -np.inf:
+            out[j] = -np.inf
+            continue
+        total = 0.0
+        for c in range(n_comp):
+            total += _exp_shifted(rows[c], top)
+        out[j] = top + math.log(total)

@@ -8,6 +8,7 @@ benchmarks and experiments call it directly.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -31,7 +32,8 @@ from .likelihoods import (
 from .motion import JumpMixture, MotionModel, motion_from_config
 from .recovery import RecoverySettings
 from .resampling import RESAMPLERS
-from .smoother import smooth
+from .smoother import Smoothed, smooth
+from .two_filter import forward_view, two_filter_smooth
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,7 @@ class TrackOutput:
     # calibration: corrected timing, clock residual, fitted model), for whoever reuses its
     # model (e.g. `rafostrack.legs`).
     model_inputs: tuple[BeaconTable, FloatInfo, Config] | None = None
+    smoother: str = "none"  # which smoother made the estimate: "ffbsm", "two_filter" or "none"
 
     @property
     def track(self) -> pd.DataFrame:
@@ -95,6 +98,7 @@ class Tracker:
     seed: int
     recovery: RecoverySettings | None = None
     factors: tuple[MoveFactor, ...] = ()
+    two_filter: bool = False  # smooth by joining a backward filter (`rafostrack.two_filter`)
 
     @classmethod
     def from_config(cls, config: Config, beacons: BeaconTable, info: FloatInfo) -> Tracker:
@@ -115,6 +119,7 @@ class Tracker:
             launch_sd_km=config.fixes.launch_sd_km,
             end_fix=PositionFix(info.end_time, info.end_lat, info.end_lon, config.fixes.end_sd_km) if use_end else None,
             smooth=config.smoother.enabled,
+            two_filter=config.smoother.two_filter,
             ambiguity=config.ambiguity,
             seed=config.filter.seed,
             recovery=_recovery(config),
@@ -142,13 +147,24 @@ class Tracker:
         label_probs: bool = True,
         keep: bool = True,
         on_step: Callable[[Step], None] | None = None,
+        backward: bool = False,
     ) -> FilterResult:
         """The forward filter over the record (and the end fix), with the float's own
-        generator; see `ParticleFilter.run` for `keep` and `on_step`."""
+        generator; see `ParticleFilter.run` for `keep` and `on_step`. `backward`: the filter
+        from the end fix back to the first window, with the drift reversed (its own
+        generator; `rafostrack.two_filter`)."""
         info = self.info
+        motion, stream = self.motion, info.float_id
+        start = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
+        events = observations(record.windows, self.end_fix)
+        if backward:
+            if self.end_fix is None:
+                raise ValueError(f"{info.float_id}: a backward filter starts from the end fix, and there is none")
+            motion, stream = self.motion.reversed(), f"{info.float_id} backward"
+            start, events = self.end_fix, list(reversed(record.windows))
         fixes = PositionFixLikelihood(info.float_id)
         pf = ParticleFilter(
-            self.motion,
+            motion,
             self.arrivals,
             fixes,
             self.settings,
@@ -156,9 +172,40 @@ class Tracker:
             recovery=self.recovery,
             factors=self.factors,
         )
-        launch = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
-        events = observations(record.windows, self.end_fix)
-        return pf.run(launch, events, float_rng(self.seed, info.float_id), keep=keep, on_step=on_step)
+        return pf.run(start, events, float_rng(self.seed, stream), keep=keep, on_step=on_step)
+
+    def _joins_two_filters(self, record: ArrivalRecord) -> bool:
+        """Whether the smoother joins a backward filter (`two_filter`): configured, an end fix
+        after every window, and no move factors (the backward filter would need them
+        reversed)."""
+        end = self.end_fix
+        return (
+            self.two_filter
+            and end is not None
+            and not self.factors
+            and all(w.time <= end.time for w in record.windows)
+            and len(record.windows) > 0
+        )
+
+    def _smooth(self, run: FilterResult, record: ArrivalRecord) -> tuple[list[Step], Smoothed]:
+        """The steps to summarise and their smoothed weights: FFBSm on the forward filter's
+        clouds, or both filters joined (`rafostrack.two_filter`) when `_joins_two_filters`."""
+        if not self._joins_two_filters(record):
+            return run.steps, smooth([s.cloud for s in run.steps], self.motion)
+        back = self.run_filter(record, label_probs=False, backward=True)
+        windows, end = run.steps[:-1], run.steps[-1]
+        if run.prior is None or back.prior is None or any(s.window is None for s in windows) or end.window is not None:
+            raise ValueError(f"{self.info.float_id}: the forward filter's steps are not the windows and the end fix")
+        clouds, smoothed = two_filter_smooth(
+            [run.prior, *(s.cloud for s in windows)],
+            [s.loglik for s in windows],
+            forward_view([back.prior, *(s.cloud for s in back.steps)]),
+            [s.loglik for s in reversed(back.steps)],
+            self.motion,
+        )
+        steps = [dataclasses.replace(s, cloud=c) for s, c in zip(windows, clouds, strict=True)] + [end]
+        weights = [*smoothed.weights, end.cloud.weights]
+        return steps, Smoothed(weights, [*smoothed.kernel_cov_km2, np.zeros((2, 2))])
 
     def track(
         self,
@@ -211,10 +258,10 @@ class Tracker:
                 float_id, run.steps, self.beacon_ids, self.ambiguity, extra_cov_km2=nuisance, regions=self._regions()
             )
         started = time.perf_counter()
-        smoothed = smooth([s.cloud for s in run.steps], self.motion)
+        steps, smoothed = self._smooth(run, record)
         estimate = build_estimate(
             float_id,
-            run.steps,
+            steps,
             self.beacon_ids,
             self.ambiguity,
             smoothed,
@@ -223,7 +270,16 @@ class Tracker:
             regions=self._regions(),
         )
         smoother_s = time.perf_counter() - started
-        return TrackOutput(estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s, **_counts(run))
+        return TrackOutput(
+            estimate,
+            filtered,
+            run.n_resamples,
+            run.warnings,
+            filter_s,
+            smoother_s,
+            **_counts(run),
+            smoother="two_filter" if self._joins_two_filters(record) else "ffbsm",
+        )
 
 
 def _counts(run: FilterResult, builder: EstimateBuilder | None = None) -> dict[str, Any]:

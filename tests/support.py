@@ -9,11 +9,13 @@ import datetime as dt
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from rafostrack.config import load_config
 from rafostrack.errors import InputError, Warnings
 from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
+from rafostrack.motion import IntegratedOU, RandomWalk
 
 try:
     from hypothesis import HealthCheck, settings
@@ -106,3 +108,34 @@ def timing_free(run: dict) -> dict:
 
 def parquet_bytes(directory: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(directory.glob("*.parquet"))}
+
+
+def rts_smoother(
+    y: np.ndarray, tr, h: np.ndarray, r: float, m0: np.ndarray, p0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact smoothed means and covariances of x_t = A x_{t-1} + b + N(0, Q), y_t = H x_t +
+    N(0, r I), x_0 ~ N(m0, p0): the Kalman filter, then the Rauch-Tung-Striebel recursions."""
+    a, b, q = tr.A, tr.b, tr.Q
+    n, d = len(y), len(m0)
+    m_f, p_f, m_p, p_p = np.empty((n, d)), np.empty((n, d, d)), np.empty((n, d)), np.empty((n, d, d))
+    m, p = m0, p0
+    for t in range(n):
+        m_p[t], p_p[t] = a @ m + b, a @ p @ a.T + q
+        s = h @ p_p[t] @ h.T + r * np.eye(len(h))
+        gain = p_p[t] @ h.T @ np.linalg.inv(s)
+        m = m_p[t] + gain @ (y[t] - h @ m_p[t])
+        p = (np.eye(d) - gain @ h) @ p_p[t]
+        m_f[t], p_f[t] = m, p
+    m_s, p_s = m_f.copy(), p_f.copy()
+    for t in range(n - 2, -1, -1):
+        c = p_f[t] @ a.T @ np.linalg.inv(p_p[t + 1])
+        m_s[t] = m_f[t] + c @ (m_s[t + 1] - m_p[t + 1])
+        p_s[t] = p_f[t] + c @ (p_s[t + 1] - p_p[t + 1]) @ c.T
+    return m_s, p_s
+
+
+# One model of each kind, at settings where the smoother clearly differs from the filter.
+LINEAR_GAUSSIAN_CASES = {
+    "random_walk": RandomWalk(5.0),
+    "ou": IntegratedOU(velocity_sd_km_per_day=6.0, decorrelation_days=4.0, mean_current_km_per_day=(3.0, -1.0)),
+}

@@ -7,13 +7,14 @@ import dataclasses
 import numpy as np
 import pandas as pd
 import pytest
+from support import LINEAR_GAUSSIAN_CASES, rts_smoother
 
 from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import BeaconTable, Cloud, FloatInfo, Particles
 from rafostrack.evaluate import inside_ellipse, position_errors_km, true_labels
 from rafostrack.geodesy import displace, local_offsets_km, range_m
 from rafostrack.method import track_record
-from rafostrack.motion import MOTION_MODELS, IntegratedOU, RandomWalk
+from rafostrack.motion import MOTION_MODELS
 from rafostrack.posterior import ELLIPSE_95_SCALE, summarise
 from rafostrack.resampling import normalise_log_weights, systematic
 from rafostrack.scenarios import synthetic_scenario
@@ -26,35 +27,6 @@ DAY = np.timedelta64(1, "D")
 NAT = np.datetime64("NaT", "ns")
 
 
-def _rts(y: np.ndarray, tr, h: np.ndarray, r: float, m0: np.ndarray, p0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Exact smoothed means and covariances of x_t = A x_{t-1} + b + N(0, Q), y_t = H x_t +
-    N(0, r I), x_0 ~ N(m0, p0): the Kalman filter, then the Rauch-Tung-Striebel recursions."""
-    a, b, q = tr.A, tr.b, tr.Q
-    n, d = len(y), len(m0)
-    m_f, p_f, m_p, p_p = np.empty((n, d)), np.empty((n, d, d)), np.empty((n, d)), np.empty((n, d, d))
-    m, p = m0, p0
-    for t in range(n):
-        m_p[t], p_p[t] = a @ m + b, a @ p @ a.T + q
-        s = h @ p_p[t] @ h.T + r * np.eye(len(h))
-        gain = p_p[t] @ h.T @ np.linalg.inv(s)
-        m = m_p[t] + gain @ (y[t] - h @ m_p[t])
-        p = (np.eye(d) - gain @ h) @ p_p[t]
-        m_f[t], p_f[t] = m, p
-    m_s, p_s = m_f.copy(), p_f.copy()
-    for t in range(n - 2, -1, -1):
-        c = p_f[t] @ a.T @ np.linalg.inv(p_p[t + 1])
-        m_s[t] = m_f[t] + c @ (m_s[t + 1] - m_p[t + 1])
-        p_s[t] = p_f[t] + c @ (p_s[t + 1] - p_p[t + 1]) @ c.T
-    return m_s, p_s
-
-
-# One model of each kind, at settings where the smoother clearly differs from the filter.
-SMOOTHER_CASES = {
-    "random_walk": RandomWalk(5.0),
-    "ou": IntegratedOU(velocity_sd_km_per_day=6.0, decorrelation_days=4.0, mean_current_km_per_day=(3.0, -1.0)),
-}
-
-
 @pytest.mark.parametrize("max_columns", [3000, 1000], ids=["all-particles", "1000-columns"])
 @pytest.mark.parametrize("name", sorted(MOTION_MODELS))
 def test_smoothed_marginals_match_the_exact_rts_smoother(name, max_columns):
@@ -64,7 +36,7 @@ def test_smoothed_marginals_match_the_exact_rts_smoother(name, max_columns):
     the filter; so must FFBSm on 1000 quantile points of each 3000-particle cloud. The
     filter moves particles in a plane with the model's own A, b, L; the smoother sees them
     on the ellipsoid, as it does in tracking."""
-    motion = SMOOTHER_CASES[name]
+    motion = LINEAR_GAUSSIAN_CASES[name]
     tr = motion.transition(1.0)
     d = tr.dim
     rng = np.random.default_rng(11)
@@ -93,7 +65,7 @@ def test_smoothed_marginals_match_the_exact_rts_smoother(name, max_columns):
         states = states[:, systematic(w, rng)]
     smoothed = smooth(clouds, motion, max_columns=max_columns).weights
     assert all(np.count_nonzero(w) <= max_columns for w in smoothed)
-    m_s, p_s = _rts(y, tr, h, r, m0, p0)
+    m_s, p_s = rts_smoother(y, tr, h, r, m0, p0)
     z, z_filter, sd_ratio = [], [], []  # errors in units of the exact smoothed sd, per axis and time
     for t, (cloud, w) in enumerate(zip(clouds, smoothed, strict=True)):
         s = summarise(cloud.lat, cloud.lon, w)

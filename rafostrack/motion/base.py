@@ -119,6 +119,20 @@ class MotionModel(ABC):
         float is given; only for models with velocity."""
         raise NotImplementedError(f"motion model {self.name!r} has no velocity")
 
+    def log_invariant_density(self, particles: Particles) -> NDArray[np.float64]:
+        """log gamma(x) (up to a constant) of the law the drift leaves invariant and is
+        reversible under: flat in position, the stationary law of the velocity (if any),
+        N(v; mean, sd^2 I). gamma(x) f(x' | x) = gamma(x') f_rev(x | x') with f_rev
+        the `reversed` model's transition: the two-filter smoother's artificial prior
+        (`rafostrack.two_filter`)."""
+        if not self.has_velocity:
+            return np.zeros(len(particles))
+        if particles.velocity_km_per_day is None:
+            raise ValueError(f"motion model {self.name!r} needs particles with a velocity")
+        mean, sd = self.stationary_velocity()
+        z = (particles.velocity_km_per_day - mean) / sd
+        return -0.5 * np.einsum("pk,pk->p", z, z) - 2.0 * np.log(sd) - np.log(2.0 * np.pi)
+
     def initial(self, lat: float, lon: float, sd_km: float, n: int, rng: np.random.Generator) -> Particles:
         """n particles about a position fix with sd `sd_km` per axis; a velocity, where the
         model has one, drawn from its stationary law (position draws first, then velocity)."""

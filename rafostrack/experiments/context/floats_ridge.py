@@ -143,6 +143,9 @@ def track_pair(task: tuple[int, Sizes]) -> dict[str, Any]:
                     # No calibration (the two runs differ by the context alone): the drift
                     # model is the scenario's own, as calibration would learn it.
                     "calibrate": {"enabled": False},
+                    # FFBSm for both: a context run cannot join a backward filter (its move
+                    # factors are not reversed; `Tracker._joins_two_filters`).
+                    "smoother": {"two_filter": False},
                     "filter": {"particles": sz.particles, "seed": seed},
                     "motion": {"mean_current_east_km_per_day": CURRENT_KM_PER_DAY[0],
                                "mean_current_north_km_per_day": CURRENT_KM_PER_DAY[1],
