@@ -187,11 +187,12 @@ class Tracker:
             and len(record.windows) > 0
         )
 
-    def _smooth(self, run: FilterResult, record: ArrivalRecord) -> tuple[list[Step], Smoothed]:
-        """The steps to summarise and their smoothed weights: FFBSm on the forward filter's
-        clouds, or both filters joined (`rafostrack.two_filter`) when `_joins_two_filters`."""
+    def _smooth(self, run: FilterResult, record: ArrivalRecord) -> tuple[list[Step], Smoothed, str]:
+        """The steps to summarise, their smoothed weights and the smoother's name: FFBSm on
+        the forward filter's clouds, or both filters joined (`rafostrack.two_filter`) when
+        `_joins_two_filters`."""
         if not self._joins_two_filters(record):
-            return run.steps, smooth([s.cloud for s in run.steps], self.motion)
+            return run.steps, smooth([s.cloud for s in run.steps], self.motion), "ffbsm"
         back = self.run_filter(record, label_probs=False, backward=True)
         windows, end = run.steps[:-1], run.steps[-1]
         if run.prior is None or back.prior is None or any(s.window is None for s in windows) or end.window is not None:
@@ -205,7 +206,7 @@ class Tracker:
         )
         steps = [dataclasses.replace(s, cloud=c) for s, c in zip(windows, clouds, strict=True)] + [end]
         weights = [*smoothed.weights, end.cloud.weights]
-        return steps, Smoothed(weights, [*smoothed.kernel_cov_km2, np.zeros((2, 2))])
+        return steps, Smoothed(weights, [*smoothed.kernel_cov_km2, np.zeros((2, 2))]), "two_filter"
 
     def track(
         self,
@@ -258,7 +259,7 @@ class Tracker:
                 float_id, run.steps, self.beacon_ids, self.ambiguity, extra_cov_km2=nuisance, regions=self._regions()
             )
         started = time.perf_counter()
-        steps, smoothed = self._smooth(run, record)
+        steps, smoothed, smoother = self._smooth(run, record)
         estimate = build_estimate(
             float_id,
             steps,
@@ -271,14 +272,7 @@ class Tracker:
         )
         smoother_s = time.perf_counter() - started
         return TrackOutput(
-            estimate,
-            filtered,
-            run.n_resamples,
-            run.warnings,
-            filter_s,
-            smoother_s,
-            **_counts(run),
-            smoother="two_filter" if self._joins_two_filters(record) else "ffbsm",
+            estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s, **_counts(run), smoother=smoother
         )
 
 

@@ -76,12 +76,14 @@ def forward_view(clouds: Sequence[Cloud]) -> list[Cloud]:
 @dataclass(frozen=True)
 class _Neighbour:
     """A neighbouring cloud as the mixture that stands for it: quantile points, their log
-    weights, and the regularised transition between it and the window."""
+    weights, and the regularised transition between it and the window; `before`: the
+    cloud at the window before (origins of the transition: P_k), else after (B_k)."""
 
     cloud: Cloud
     index: NDArray[np.intp]
     log_weights: NDArray[np.float64]
     components: list[tuple[float, LinearGaussian]]
+    before: bool
 
 
 def _neighbour(
@@ -97,17 +99,17 @@ def _neighbour(
     else:
         components = [(first, regularised(kernel, spread, at_destination=True)), *rest]
         log_weights = log_weights - motion.log_invariant_density(cloud.particles.take(index))
-    return _Neighbour(cloud, index, log_weights, components)
+    return _Neighbour(cloud, index, log_weights, components, before)
 
 
-def _log_density(near: _Neighbour, points: NDArray, ref: tuple[float, float], *, before: bool) -> NDArray:
+def _log_density(near: _Neighbour, points: NDArray, ref: tuple[float, float]) -> NDArray:
     """log P_k (neighbour before: its particles are the origins) or log B_k (after: the
     destinations) at the window's points (tangent-plane states about `ref`)."""
     states = plane_states(near.cloud, near.index, *ref)
-    origins, destinations = (states, points) if before else (points, states)
+    origins, destinations = (states, points) if near.before else (points, states)
     za, zb, log_norm = whitened(near.components, origins, destinations)
     out = np.empty(len(points))
-    if before:  # sum over origins i, one value per destination j
+    if near.before:  # sum over origins i, one value per destination j
         log_mixture_density(za, zb, log_norm, near.log_weights, out)
     else:  # sum over destinations (the same squared distances, roles swapped)
         log_mixture_density(zb, za, log_norm, near.log_weights, out)
@@ -132,8 +134,8 @@ def join_window(
     ref = (float(fwd.lat[heaviest]), float(fwd.lon[heaviest]))
     # Each filter's particles need the other filter's neighbour only: B_k at the forward
     # particles, P_k at the backward ones.
-    log_b = _log_density(after, plane_states(fwd, np.arange(len(fwd.weights)), *ref), ref, before=False)
-    log_p = _log_density(before, plane_states(bwd, np.arange(len(bwd.weights)), *ref), ref, before=True)
+    log_b = _log_density(after, plane_states(fwd, np.arange(len(fwd.weights)), *ref), ref)
+    log_p = _log_density(before, plane_states(bwd, np.arange(len(bwd.weights)), *ref), ref)
     l_f, l_b = log_evidence
     with np.errstate(divide="ignore"):
         log_omega = np.concatenate(
@@ -171,14 +173,15 @@ def two_filter_smooth(
     if len(backward) != n_windows + 1 or len(forward_loglik) != n_windows or len(backward_loglik) != n_windows:
         raise ValueError("forward and backward filters must cover the same windows")
     h2 = silverman_bandwidth(len(forward[0].weights), motion.dim) ** 2 if regularise else 0.0
-    spread = [h2 * cloud_covariance(c) for c in forward[:-1]], [h2 * cloud_covariance(c) for c in backward[1:]]
+    forward_spread = [h2 * cloud_covariance(c) for c in forward[:-1]]
+    backward_spread = [h2 * cloud_covariance(c) for c in backward[1:]]
     clouds, kernels = [], []
     for k in range(n_windows):
         now = forward[k + 1]
         if backward[k].time != now.time:
             raise ValueError(f"backward filter at {backward[k].time}, forward at {now.time}")
-        before = _neighbour(forward[k], now.time, motion, spread[0][k], before=True, max_rows=max_rows)
-        after = _neighbour(backward[k + 1], now.time, motion, spread[1][k], before=False, max_rows=max_rows)
+        before = _neighbour(forward[k], now.time, motion, forward_spread[k], before=True, max_rows=max_rows)
+        after = _neighbour(backward[k + 1], now.time, motion, backward_spread[k], before=False, max_rows=max_rows)
         evidence = (float(np.nan_to_num(forward_loglik[k])), float(np.nan_to_num(backward_loglik[k])))
         joined = join_window(before, now, backward[k], after, evidence, motion, max_columns)
         clouds.append(joined)
