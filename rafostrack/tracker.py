@@ -32,8 +32,8 @@ from .likelihoods import (
 from .motion import JumpMixture, MotionModel, motion_from_config
 from .recovery import RecoverySettings
 from .resampling import RESAMPLERS
-from .smoother import Smoothed, smooth
-from .two_filter import forward_view, two_filter_smooth
+from .smoother import MAX_COLUMNS, Smoothed, column_points, smooth
+from .two_filter import JOIN_COLUMNS, forward_view, two_filter_smooth
 
 
 @dataclass(frozen=True)
@@ -187,13 +187,36 @@ class Tracker:
             and len(record.windows) > 0
         )
 
-    def _smooth(self, run: FilterResult, record: ArrivalRecord) -> tuple[list[Step], Smoothed, str]:
-        """The steps to summarise, their smoothed weights and the smoother's name: FFBSm on
-        the forward filter's clouds, or both filters joined (`rafostrack.two_filter`) when
-        `_joins_two_filters`."""
-        if not self._joins_two_filters(record):
-            return run.steps, smooth([s.cloud for s in run.steps], self.motion), "ffbsm"
-        back = self.run_filter(record, label_probs=False, backward=True)
+    def _run_kept(
+        self,
+        record: ArrivalRecord,
+        columns: int,
+        *,
+        label_probs: bool = False,
+        on_step: Callable[[Step], None] | None = None,
+        backward: bool = False,
+    ) -> FilterResult:
+        """`run_filter`, keeping of each step what a smoother reads: its cloud on at most
+        `columns` quantile points of its weights (`smoother.column_points`, where the
+        smoothers would take them anyway), so that the history's memory does not grow with
+        the particle count. `on_step` sees each whole step."""
+        kept: list[Step] = []
+
+        def keep(step: Step) -> None:
+            if on_step is not None:
+                on_step(step)
+            kept.append(dataclasses.replace(step, cloud=column_points(step.cloud, columns)[0]))
+
+        run = self.run_filter(record, label_probs=label_probs, keep=False, on_step=keep, backward=backward)
+        return dataclasses.replace(run, steps=kept)
+
+    def _smooth(self, run: FilterResult, record: ArrivalRecord, two_filter: bool) -> tuple[list[Step], Smoothed]:
+        """The steps to summarise and their smoothed weights: FFBSm on the forward filter's
+        clouds, or, with `two_filter` (`_joins_two_filters`), both filters joined
+        (`rafostrack.two_filter`)."""
+        if not two_filter:
+            return run.steps, smooth([s.cloud for s in run.steps], self.motion)
+        back = self._run_kept(record, JOIN_COLUMNS, backward=True)
         windows, end = run.steps[:-1], run.steps[-1]
         if run.prior is None or back.prior is None or any(s.window is None for s in windows) or end.window is not None:
             raise ValueError(f"{self.info.float_id}: the forward filter's steps are not the windows and the end fix")
@@ -206,7 +229,7 @@ class Tracker:
         )
         steps = [dataclasses.replace(s, cloud=c) for s, c in zip(windows, clouds, strict=True)] + [end]
         weights = [*smoothed.weights, end.cloud.weights]
-        return steps, Smoothed(weights, [*smoothed.kernel_cov_km2, np.zeros((2, 2))]), "two_filter"
+        return steps, Smoothed(weights, [*smoothed.kernel_cov_km2, np.zeros((2, 2))])
 
     def track(
         self,
@@ -222,8 +245,10 @@ class Tracker:
         `progress(done, total)` is told of each filter step.
 
         Without smoothing, each step is summarised as the filter makes it and then dropped,
-        so memory does not grow with the record; smoothing needs every step's cloud (about
-        24 bytes per particle per window, 40 with a velocity)."""
+        so memory does not grow with the record. Smoothing keeps every step's cloud on at
+        most `smoother.MAX_COLUMNS` quantile points of its weights (FFBSm), or each filter's
+        on `two_filter.JOIN_COLUMNS` (`_run_kept`): at most 80 KB per window with a
+        velocity, whatever the particle count."""
         float_id = self.info.float_id
         started = time.perf_counter()
 
@@ -237,29 +262,31 @@ class Tracker:
             if progress is not None:
                 progress(next(done), total)
 
+        filtered = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered", self._regions())
+        summarise_filtered = also_filtered or not self.smooth
+
+        def summarise(step: Step) -> None:
+            if summarise_filtered:
+                filtered.add(step, extra_cov_km2=extra(step.cloud.time))
+            report(step)
+
         if not self.smooth:
-            builder = EstimateBuilder(float_id, self.beacon_ids, self.ambiguity, "filtered", self._regions())
-
-            def summarise(step: Step) -> None:
-                builder.add(step, extra_cov_km2=extra(step.cloud.time))
-                report(step)
-
             run = self.run_filter(record, keep=False, on_step=summarise)
-            estimate = builder.result()
+            estimate = filtered.result()
             elapsed = time.perf_counter() - started
-            return TrackOutput(estimate, estimate, run.n_resamples, run.warnings, elapsed, 0.0, **_counts(run, builder))
-
-        run = self.run_filter(record, label_probs=also_filtered, on_step=report)
-        filter_s = time.perf_counter() - started
-        times = np.array([s.cloud.time for s in run.steps], dtype="datetime64[ns]")
-        nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))
-        filtered = None
-        if also_filtered:
-            filtered = build_estimate(
-                float_id, run.steps, self.beacon_ids, self.ambiguity, extra_cov_km2=nuisance, regions=self._regions()
+            return TrackOutput(
+                estimate, estimate, run.n_resamples, run.warnings, elapsed, 0.0, **_counts(run, filtered)
             )
+
+        two_filter = self._joins_two_filters(record)
+        run = self._run_kept(
+            record, JOIN_COLUMNS if two_filter else MAX_COLUMNS, label_probs=also_filtered, on_step=summarise
+        )
+        filter_s = time.perf_counter() - started
         started = time.perf_counter()
-        steps, smoothed, smoother = self._smooth(run, record)
+        steps, smoothed = self._smooth(run, record, two_filter)
+        times = np.array([s.cloud.time for s in steps], dtype="datetime64[ns]")
+        nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))
         estimate = build_estimate(
             float_id,
             steps,
@@ -272,7 +299,14 @@ class Tracker:
         )
         smoother_s = time.perf_counter() - started
         return TrackOutput(
-            estimate, filtered, run.n_resamples, run.warnings, filter_s, smoother_s, **_counts(run), smoother=smoother
+            estimate,
+            filtered.result() if also_filtered else None,
+            run.n_resamples,
+            run.warnings,
+            filter_s,
+            smoother_s,
+            **_counts(run),
+            smoother="two_filter" if two_filter else "ffbsm",
         )
 
 

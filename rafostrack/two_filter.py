@@ -35,9 +35,11 @@ importance sampling instead would divide by each filter's proposal density, norm
 its own evidence, in both filters' weights: a lost filter's low evidence would then bias
 the healthy filter's weights too.)
 
-Cost per window O((N_f + N_b) M): M = `smoother.MAX_ROWS` quantile points of each
-neighbouring cloud stand for it in P_k and B_k, and each filter's cloud at k enters as at
-most `smoother.MAX_COLUMNS` quantile points of its weights. As in `smoother.smooth`, each
+Cost per window O(C M): M = `smoother.MAX_ROWS` quantile points of each neighbouring cloud
+stand for it in P_k and B_k, and each filter's cloud at k enters as at most C =
+`JOIN_COLUMNS` quantile points of its weights (the union then has no more points than one
+filter's cloud, whatever the particle count, and the smoothed labels and summaries cost no
+more than FFBSm's). As in `smoother.smooth`, each
 particle stands for a Gaussian kernel of covariance h^2 Sigma (regularised).
 """
 
@@ -53,7 +55,6 @@ from .domain import Cloud, Particles, days_between
 from .motion import LinearGaussian, MotionModel
 from .resampling import quantile_points
 from .smoother import (
-    MAX_COLUMNS,
     MAX_ROWS,
     PRUNE,
     Smoothed,
@@ -65,6 +66,9 @@ from .smoother import (
     whitened,
 )
 from .smoother_kernel import log_mixture_density
+
+# Each filter's cloud at a window enters the join as at most this many quantile points.
+JOIN_COLUMNS = 512
 
 
 def forward_view(clouds: Sequence[Cloud]) -> list[Cloud]:
@@ -123,7 +127,7 @@ def join_window(
     after: _Neighbour,
     log_evidence: tuple[float, float],
     motion: MotionModel,
-    max_columns: int = MAX_COLUMNS,
+    max_columns: int = JOIN_COLUMNS,
 ) -> Cloud:
     """The smoothed marginal at one window on the particles of both filters (module
     docstring): their union and its weights omega, normalised together. `log_evidence`:
@@ -158,7 +162,7 @@ def two_filter_smooth(
     motion: MotionModel,
     *,
     regularise: bool = True,
-    max_columns: int = MAX_COLUMNS,
+    max_columns: int = JOIN_COLUMNS,
     max_rows: int = MAX_ROWS,
 ) -> tuple[list[Cloud], Smoothed]:
     """Smoothed marginals of windows 1..K (module docstring) on both filters' particles.

@@ -3,17 +3,22 @@ against truth, reproducibility, calibration, and every registered component."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from rafostrack.config import METHODS, load_config, method_overrides, with_overrides
 from rafostrack.engines import ENGINES
+from rafostrack.estimates import build_estimate
 from rafostrack.evaluate import association_accuracy, position_errors_km
 from rafostrack.likelihoods import ARRIVAL_LIKELIHOODS
 from rafostrack.method import track_record
 from rafostrack.motion import MOTION_MODELS
 from rafostrack.resampling import RESAMPLERS
+from rafostrack.smoother import MAX_COLUMNS, smooth
 from rafostrack.tracker import Tracker
+from rafostrack.two_filter import JOIN_COLUMNS
 
 
 def _run(mission, method, particles=500, seed=0):
@@ -97,3 +102,38 @@ def test_every_registered_component_assembles_and_tracks(sim_mission, motion, li
 def test_methods_name_registered_components():
     for likelihood, engine in METHODS.values():
         assert likelihood in ARRIVAL_LIKELIHOODS and engine in ENGINES
+
+
+@pytest.mark.parametrize("two_filter", [False, True], ids=["ffbsm", "two-filter"])
+def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_mission, two_filter):
+    """The smoothing pass keeps each filter step's cloud on at most MAX_COLUMNS (FFBSm) or
+    JOIN_COLUMNS (two-filter) quantile points, whatever the particle count; with FFBSm, which
+    takes those points anyway, the estimate is the one made from the whole clouds."""
+    sim = sim_mission.floats[0]
+    record = dataclasses.replace(sim.record, windows=sim.record.windows[:30])
+    config = with_overrides(
+        load_config(), filter={"particles": MAX_COLUMNS + 500, "seed": 1}, smoother={"two_filter": two_filter}
+    )
+    tracker = Tracker.from_config(config, sim_mission.beacons, sim.info)
+    columns = JOIN_COLUMNS if two_filter else MAX_COLUMNS
+    kept = tracker._run_kept(record, columns)
+    assert all(len(s.cloud.weights) <= columns for s in kept.steps)  # of MAX_COLUMNS + 500 particles
+    out = tracker.track(record)
+    assert out.smoother == ("two_filter" if two_filter else "ffbsm")
+    if two_filter:
+        return
+    run = tracker.run_filter(record, label_probs=False)  # the whole clouds, same draws
+    smoothed = smooth([s.cloud for s in run.steps], tracker.motion)
+    whole = build_estimate(
+        sim.info.float_id,
+        run.steps,
+        tracker.beacon_ids,
+        tracker.ambiguity,
+        smoothed,
+        tracker.arrivals.label_probs,
+        extra_cov_km2=np.array(smoothed.kernel_cov_km2),
+    )
+    cols = ["lat", "lon", "sd_km", "smaj_km", "smin_km"]
+    np.testing.assert_allclose(out.track[cols].to_numpy(), whole.track[cols].to_numpy(), rtol=1e-12, atol=1e-12)
+    assert out.labels["beacon_id"].equals(whole.labels["beacon_id"])
+    np.testing.assert_allclose(out.labels["prob"], whole.labels["prob"], atol=1e-9)

@@ -123,7 +123,7 @@ def test_two_filter_marginals_match_the_exact_rts_smoother(name):
         [np.sqrt(np.diag(summarise(c.lat, c.lon, w).cov_km2)) for c, w in zip(clouds, smoothed.weights, strict=True)]
     )
     sd_ratio = np.sqrt(sd_est**2 + np.array([np.diag(k) for k in smoothed.kernel_cov_km2])) / sd
-    # Monte Carlo error of 3000 particles per filter.
+    # Monte Carlo error of 3000 particles per filter, each joined on JOIN_COLUMNS quantile points.
     assert np.sqrt(np.mean(z**2)) < 0.25 and np.abs(z).max() < 0.75
     assert np.sqrt(np.mean((sd_ratio - 1) ** 2)) < 0.15 and np.abs(sd_ratio - 1).max() < 0.35
     assert np.sqrt(np.mean(z_filter**2)) > 0.4  # the test can tell the smoother from the filter
