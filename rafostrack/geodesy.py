@@ -8,7 +8,10 @@ metres of the exact geodesic over the few thousand kilometres of an acoustic arr
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import vectorize
 from numpy.typing import ArrayLike, NDArray
 
 WGS84_A_M = 6378137.0
@@ -29,24 +32,41 @@ def range_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) 
     GeographicLib).
     """
     # Trigonometric terms of each point (cheap: the inputs before broadcasting), so that a
-    # pair costs one arcsin and two square roots; with P = (b1 + b2)/2, Q = (b2 - b1)/2:
-    # sin P cos Q = (sin b1 + sin b2)/2, cos P sin Q = (sin b2 - sin b1)/2,
-    # sin^2(sigma/2) = h, cos^2(sigma/2) = 1 - h, sin sigma = 2 sqrt(h (1 - h)).
+    # pair costs one arcsin and two square roots (`_pair_range_m`, compiled: one pass over
+    # the pairs, no temporaries).
     b1, half_b1, half_l1 = _point_terms(lat1, lon1)
     b2, half_b2, half_l2 = _point_terms(lat2, lon2)
-    # Haversine h = sin^2(sigma/2), well conditioned at short range; the half-angle
-    # differences by the subtraction formula (absolute error ~1e-16, metres are unaffected).
-    sin_half_db = half_b2[0] * half_b1[1] - half_b2[1] * half_b1[0]
-    sin_half_dl = half_l2[0] * half_l1[1] - half_l2[1] * half_l1[0]
-    h = np.clip(sin_half_db**2 + b1[1] * b2[1] * sin_half_dl**2, 0.0, 1.0)
-    sigma = 2.0 * np.arcsin(np.sqrt(h))
-    sin_sigma = 2.0 * np.sqrt(h * (1.0 - h))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        x = (sigma - sin_sigma) * (0.5 * (b1[0] + b2[0])) ** 2 / (1.0 - h)
-        y = (sigma + sin_sigma) * (0.5 * (b2[0] - b1[0])) ** 2 / h
-        dist = WGS84_A_M * (sigma - WGS84_F / 2.0 * (x + y))
-    # Coincident points make Y 0/0; their distance is 0.
-    return np.where(h > 0.0, dist, 0.0)
+    return _pair_range_m(*b1, *half_b1, *half_l1, *b2, *half_b2, *half_l2)
+
+
+@vectorize([f"float64({', '.join(['float64'] * 12)})"], cache=True)
+def _pair_range_m(sb1, cb1, shb1, chb1, shl1, chl1, sb2, cb2, shb2, chb2, shl2, chl2):  # pragma: no cover
+    """Andoyer-Lambert (`range_m`) from each point's (sin b, cos b), (sin b/2, cos b/2),
+    (sin lambda/2, cos lambda/2). With P = (b1 + b2)/2, Q = (b2 - b1)/2: sin P cos Q =
+    (sin b1 + sin b2)/2, cos P sin Q = (sin b2 - sin b1)/2, sin^2(sigma/2) = h, cos^2(sigma/2)
+    = 1 - h, sin sigma = 2 sqrt(h (1 - h)); the half-angle differences by the subtraction
+    formula (absolute error ~1e-16: metres are unaffected), h by the haversine (well
+    conditioned at short range)."""
+    sin_half_db = shb2 * chb1 - chb2 * shb1
+    sin_half_dl = shl2 * chl1 - chl2 * shl1
+    h = sin_half_db * sin_half_db + cb1 * cb2 * sin_half_dl * sin_half_dl
+    # The loop over pairs is vectorised, so every branch is evaluated for every pair: no
+    # expression may divide by zero or order-compare a NaN (either raises the invalid flag,
+    # a RuntimeWarning). Edge cases are computed with h = 1/2 and chosen at the end.
+    missing = math.isnan(h)  # a missing position
+    h = min(max(0.5 if missing else h, 0.0), 1.0)
+    coincident, antipodal = h == 0.0, h == 1.0  # Y would be 0/0; X x/0 (outside the domain)
+    if coincident or antipodal:
+        h = 0.5
+    sigma = 2.0 * math.asin(math.sqrt(h))
+    sin_sigma = 2.0 * math.sqrt(h * (1.0 - h))
+    x = (sigma - sin_sigma) * (0.5 * (sb1 + sb2)) ** 2 / (1.0 - h)
+    y = (sigma + sin_sigma) * (0.5 * (sb2 - sb1)) ** 2 / h
+    if missing or antipodal:
+        return math.nan
+    if coincident:
+        return 0.0
+    return WGS84_A_M * (sigma - WGS84_F / 2.0 * (x + y))
 
 
 def _point_terms(lat_deg: ArrayLike, lon_deg: ArrayLike) -> tuple[tuple[NDArray, NDArray], ...]:

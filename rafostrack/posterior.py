@@ -63,11 +63,14 @@ class Modes:
         return self.first if self.ambiguous or self.parted else self.whole
 
 
+def _weighted_mean(xy: NDArray, w: NDArray) -> NDArray:
+    return np.einsum("p,pk->k", w, xy) / w.sum()
+
+
 def _weighted_mean_cov(xy: NDArray, w: NDArray) -> tuple[NDArray, NDArray]:
-    total = w.sum()
-    mean = np.einsum("p,pk->k", w, xy) / total
+    mean = _weighted_mean(xy, w)
     d = xy - mean
-    return mean, np.einsum("p,pi,pj->ij", w, d, d) / total
+    return mean, np.einsum("p,pi,pj->ij", w, d, d) / w.sum()
 
 
 def _to_gaussian(ref_lat: float, ref_lon: float, mean: NDArray, cov: NDArray) -> Gaussian2D:
@@ -154,8 +157,8 @@ def two_modes(
     for _ in range(iterations):
         if side.all() or not side.any():
             break
-        m1 = _weighted_mean_cov(xy[side], weights[side])[0]
-        m0 = _weighted_mean_cov(xy[~side], weights[~side])[0]
+        m1 = _weighted_mean(xy[side], weights[side])
+        m0 = _weighted_mean(xy[~side], weights[~side])
         new_side = ((xy - m1) ** 2).sum(axis=1) < ((xy - m0) ** 2).sum(axis=1)
         if np.array_equal(new_side, side):
             break

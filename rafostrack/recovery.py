@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import logsumexp
 
 from .domain import Particles, Window
 from .geodesy import displace, local_offsets_km
 from .likelihoods import ArrivalLikelihood
 from .motion import MotionModel
+from .resampling import log_sum_exp
 
 KM_PER_S = 1.48  # travel distance per second of arrival time, for sizing the grids
 
@@ -113,7 +113,7 @@ class Reseeding:
     def _mixture(self) -> tuple[NDArray, NDArray, NDArray]:
         c = self.candidates
         keep = c.loglik >= c.best - self.keep_nats
-        log_pi = c.loglik[keep] - logsumexp(c.loglik[keep])
+        log_pi = c.loglik[keep] - log_sum_exp(c.loglik[keep])
         return c.lat[keep], c.lon[keep], log_pi
 
     def sample(self, n: int, rng: np.random.Generator) -> Particles:
@@ -198,7 +198,7 @@ class RecoveryMonitor:
         self._since_check += 1
         post = prior_weights * np.exp(loglik - loglik.max())
         post_ess = float(post.sum() ** 2 / np.einsum("p,p->", post, post)) if post.sum() > 0 else 0.0
-        log_evidence = float(logsumexp(loglik, b=prior_weights))
+        log_evidence = log_sum_exp(loglik, prior_weights)
         due = (
             gap_days >= s.gap_days
             or self._since_check >= s.check_every

@@ -14,14 +14,27 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import logsumexp
 
 Resampler = Callable[..., NDArray[np.intp]]  # (weights, rng, n=None) -> n ancestor indices
 
 
+def log_sum_exp(log_w: NDArray, scale: NDArray | None = None) -> float:
+    """log sum_p b_p exp(log_w_p) (b = `scale`, non-negative; 1 when None), summed about the
+    largest term so that nothing overflows; -inf when every term is zero. (What
+    `scipy.special.logsumexp` gives, for one 1-d array, without its per-call overhead: the
+    filter calls this a few times per window.)"""
+    if scale is not None:
+        with np.errstate(divide="ignore"):
+            log_w = log_w + np.log(scale)
+    top = float(np.max(log_w))
+    if not np.isfinite(top):
+        return top
+    return top + float(np.log(np.sum(np.exp(log_w - top))))
+
+
 def normalise_log_weights(log_w: NDArray) -> tuple[NDArray[np.float64], float]:
-    """Normalised weights W_p = exp(log_w_p - logsumexp(log_w)) and the log-sum."""
-    log_sum = float(logsumexp(log_w))
+    """Normalised weights W_p = exp(log_w_p - log sum_q exp(log_w_q)) and the log-sum."""
+    log_sum = log_sum_exp(log_w)
     return np.exp(log_w - log_sum), log_sum
 
 

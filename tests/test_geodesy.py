@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from geographiclib.geodesic import Geodesic
@@ -26,6 +28,20 @@ def test_range_is_symmetric_and_zero_at_a_point():
     assert range_m(-58.0, -100.0, -58.0, -100.0) == 0.0
     a = range_m(-58.0, -100.0, -60.0, -80.0)
     assert a == pytest.approx(range_m(-60.0, -80.0, -58.0, -100.0), rel=1e-12)
+    assert np.isnan(range_m(0.0, 0.0, 0.0, 180.0))  # antipodal: outside the formula's domain
+
+
+def test_missing_and_coincident_positions_without_a_warning():
+    """A missing position has a missing range, a point its own range 0, among many pairs
+    (the compiled loop is vectorised: no edge case may raise a floating-point warning)."""
+    lat = np.linspace(-60.0, -55.0, 64)
+    lon = np.linspace(-100.0, -90.0, 64)
+    lat[::7] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = range_m(lat, lon, lat, lon)
+    assert np.all(np.isnan(r[::7]))
+    assert np.all(np.delete(r, np.arange(0, 64, 7)) == 0.0)
 
 
 def test_range_broadcasts_particles_against_beacons():

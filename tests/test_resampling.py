@@ -2,8 +2,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.special import logsumexp
 
-from rafostrack.resampling import ess, normalise_log_weights, quantile_points, systematic
+from rafostrack.resampling import ess, log_sum_exp, normalise_log_weights, quantile_points, systematic
 
 
 def test_systematic_copies_each_particle_floor_or_ceil_times():
@@ -20,6 +21,21 @@ def test_systematic_is_unbiased():
     w = np.array([0.05, 0.15, 0.3, 0.5])
     mean = np.mean([np.bincount(systematic(w, rng), minlength=4) for _ in range(4000)], axis=0)
     assert np.allclose(mean / 4, w, atol=0.01)
+
+
+def test_log_sum_exp_matches_scipy():
+    """Against scipy's logsumexp: large magnitudes, -inf terms, zero and tiny scales, all
+    terms zero."""
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        log_w = rng.normal(0.0, 300.0, size=50) - 1e4 * rng.integers(0, 2)
+        log_w[rng.random(50) < 0.2] = -np.inf
+        scale = rng.dirichlet(np.full(50, 0.2))
+        scale[rng.random(50) < 0.2] = 0.0
+        assert log_sum_exp(log_w) == pytest.approx(logsumexp(log_w), rel=1e-13, abs=1e-10)
+        assert log_sum_exp(log_w, scale) == pytest.approx(logsumexp(log_w, b=scale), rel=1e-13, abs=1e-10)
+    assert log_sum_exp(np.full(3, -np.inf)) == -np.inf
+    assert log_sum_exp(np.zeros(3), np.zeros(3)) == -np.inf
 
 
 def test_log_weights_survive_huge_magnitudes():
