@@ -14,6 +14,11 @@ ratio, the run time; then the issue's targets, PASS or FAIL, with the floats fai
 
     python benchmarks/robustness.py [--floats 24] [--days 240] [--seed 2026] [--workers 2]
                                     [--out DIR] [--config FILE] [--only ID ...] [--csv FILE]
+                                    [--filter-seeds 0 1 ...]
+
+A single run's per-float figures move with the filter's random path (README, Robustness):
+`--filter-seeds` tracks every float once per `[filter] seed` given, prints the table per
+seed, and then, per target, the floats that fail it with every seed.
 """
 
 from __future__ import annotations
@@ -115,17 +120,25 @@ def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFra
     return right / total if total else float("nan")
 
 
-def score(task: tuple[Path, Path, tuple[Path, ...]]) -> dict[str, Any]:
-    """Track one float by default and with its true labels; score both against the truth."""
-    float_file, out_root, config_files = task
+def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> dict[str, Any]:
+    """Track one float by default and with its true labels (with the filter seed, when
+    given); score both against the truth."""
+    float_file, out_root, config_files, seed = task
+    seeded = {} if seed is None else {"filter": {"seed": seed}}
+    if seed is not None:
+        out_root = out_root / f"seed{seed}"
+        out_root.mkdir(exist_ok=True)
     truth = pd.read_csv(float_file.parent / "truth" / f"{float_file.stem}.csv", parse_dates=["time"])
     truth["time"] = truth["time"].dt.tz_localize(None)
     events = json.loads((float_file.parent / "truth" / f"{float_file.stem}.json").read_text())
     started = time.perf_counter()
-    ours = track_float(TrackInputs(float_file, config_files=config_files), out_root / "default", plots=False)
+    ours = track_float(
+        TrackInputs(float_file, config_files=config_files, overrides=seeded), out_root / "default", plots=False
+    )
     seconds = time.perf_counter() - started
+    ref_overrides = {"filter": {**TRUE_LABELS["filter"], **seeded.get("filter", {})}}
     ref = track_float(
-        TrackInputs(float_file, config_files=config_files, overrides=TRUE_LABELS), out_root / "labelled", plots=False
+        TrackInputs(float_file, config_files=config_files, overrides=ref_overrides), out_root / "labelled", plots=False
     )
     track = ours.output.track
     labelled = load_float(TrackInputs(float_file, overrides=TRUE_LABELS))  # the true labels
@@ -134,6 +147,7 @@ def score(task: tuple[Path, Path, tuple[Path, ...]]) -> dict[str, Any]:
     status = track["status"].value_counts().to_dict() if "status" in track else {}
     row = {
         "float": float_file.stem,
+        "filter_seed": seed,
         "geometry": events["geometry"],
         "clutter": events["clutter_rate"],
         "rmse_km": float(np.sqrt(np.mean(err**2))),
@@ -186,13 +200,15 @@ def main() -> None:
     parser.add_argument("--config", type=Path, action="append", default=[], help="an extra config layer")
     parser.add_argument("--only", nargs="+", help="float ids to run")
     parser.add_argument("--csv", type=Path, help="write the per-float table here")
+    parser.add_argument("--filter-seeds", type=int, nargs="+", help="track every float with each [filter] seed")
     args = parser.parse_args()
     root = args.out or Path(tempfile.mkdtemp(prefix="rafostrack-robustness-"))
     root.mkdir(parents=True, exist_ok=True)
     files = make_missions(root / "missions", args.floats, args.days, args.seed)
     if args.only:
         files = [f for f in files if f.stem in set(args.only)]
-    tasks = [(f, root / "out", tuple(args.config)) for f in files]
+    seeds: list[int | None] = list(args.filter_seeds) if args.filter_seeds else [None]
+    tasks = [(f, root / "out", tuple(args.config), seed) for seed in seeds for f in files]
     (root / "out").mkdir(exist_ok=True)
     started = time.perf_counter()
     if args.workers > 1:
@@ -200,22 +216,32 @@ def main() -> None:
             rows = list(pool.map(score, tasks))
     else:
         rows = [score(t) for t in tasks]
-    table = pd.DataFrame(rows).fillna(0)
+    table = pd.DataFrame(rows)
+    counts = sorted(c for c in table.columns if c.startswith("n_"))
+    table[counts] = table[counts].fillna(0).astype(int)  # a status no window of a float had
     pd.set_option("display.width", 200)
     cols = ["float", "geometry", "clutter", "rmse_km", "p95_km", "max_km", "labels", "labels_oracle", "cover95",
-            "ess_med", "ref_rmse_km", "ref_p95_km", "ratio", "seconds"]  # fmt: skip
-    counts = sorted(c for c in table.columns if c.startswith("n_"))
-    table[counts] = table[counts].astype(int)
-    cols += counts
-    print(table[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
-    print(f"\n{len(table)} floats in {time.perf_counter() - started:.0f} s ({args.workers} workers); outputs in {root}")
-    for name, failing in targets(table):
-        print(
-            f"{'PASS' if not failing else 'FAIL'}: {name}"
-            + (f" ({len(failing)}: {', '.join(failing)})" if failing else "")
-        )
-    over = table.loc[table["ref_p95_km"] > 15, "float"]
-    print(f"true-label filter with p95 > 15 km: {len(over)}" + (f" ({', '.join(over)})" if len(over) else ""))
+            "ess_med", "ref_rmse_km", "ref_p95_km", "ratio", "seconds", *counts]  # fmt: skip
+    failing_with: list[list[tuple[str, list[str]]]] = []
+    for seed in seeds:
+        runs = table[table["filter_seed"].isna()] if seed is None else table[table["filter_seed"] == seed]
+        if seed is not None:
+            print(f"\n[filter] seed = {seed}")
+        print(runs[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+        failing_with.append(targets(runs))
+        for name, failing in failing_with[-1]:
+            print(
+                f"{'PASS' if not failing else 'FAIL'}: {name}"
+                + (f" ({len(failing)}: {', '.join(failing)})" if failing else "")
+            )
+        over = runs.loc[runs["ref_p95_km"] > 15, "float"]
+        print(f"true-label filter with p95 > 15 km: {len(over)}" + (f" ({', '.join(over)})" if len(over) else ""))
+    if len(seeds) > 1:
+        print(f"\nfailing with every seed ({', '.join(map(str, seeds))}):")
+        for k, (name, _) in enumerate(failing_with[0]):
+            always = sorted(set.intersection(*(set(per_seed[k][1]) for per_seed in failing_with)))
+            print(f"  {name}: {len(always)}" + (f" ({', '.join(always)})" if always else ""))
+    print(f"\n{len(table)} runs in {time.perf_counter() - started:.0f} s ({args.workers} workers); outputs in {root}")
     if args.csv:
         table.to_csv(args.csv, index=False)
 

@@ -131,6 +131,13 @@ class StressConfig:
     # float (the tracker then marks such stretches `unsupported`).
     min_covered_fraction: float = 0.9
 
+    def __post_init__(self) -> None:
+        shortest = self.gap_days[1] + 21  # a gap is placed at least 10 days from either end
+        if self.gaps and self.days < shortest:
+            raise ValueError(
+                f"StressConfig: days must be at least {shortest} with gaps (got {self.days}); or gaps=False"
+            )
+
 
 @dataclass(frozen=True)
 class StressFloat:
