@@ -124,8 +124,9 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> dict[str, An
     """Track one float by default and with its true labels (with the filter seed, when
     given); score both against the truth."""
     float_file, out_root, config_files, seed = task
-    seeded = {} if seed is None else {"filter": {"seed": seed}}
+    seeded: dict[str, Any] = {}
     if seed is not None:
+        seeded = {"seed": seed}
         out_root = out_root / f"seed{seed}"
         out_root.mkdir(exist_ok=True)
     truth = pd.read_csv(float_file.parent / "truth" / f"{float_file.stem}.csv", parse_dates=["time"])
@@ -133,10 +134,12 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> dict[str, An
     events = json.loads((float_file.parent / "truth" / f"{float_file.stem}.json").read_text())
     started = time.perf_counter()
     ours = track_float(
-        TrackInputs(float_file, config_files=config_files, overrides=seeded), out_root / "default", plots=False
+        TrackInputs(float_file, config_files=config_files, overrides={"filter": seeded}),
+        out_root / "default",
+        plots=False,
     )
     seconds = time.perf_counter() - started
-    ref_overrides = {"filter": {**TRUE_LABELS["filter"], **seeded.get("filter", {})}}
+    ref_overrides = {"filter": {**TRUE_LABELS["filter"], **seeded}}
     ref = track_float(
         TrackInputs(float_file, config_files=config_files, overrides=ref_overrides), out_root / "labelled", plots=False
     )

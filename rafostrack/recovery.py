@@ -135,12 +135,9 @@ class Reseeding:
         for k in range(len(log_pi)):  # a few tens of components
             east, north = local_offsets_km(particles.lat, particles.lon, lat_c[k], lon_c[k])
             terms.append(log_pi[k] - (east * east + north * north) / (2.0 * s2) - np.log(2.0 * np.pi * s2))
-        out = np.logaddexp.reduce(np.array(terms), axis=0)
-        if self.motion.has_velocity and particles.velocity_km_per_day is not None:
-            mean, sd = self.motion.stationary_velocity()
-            z = (particles.velocity_km_per_day - mean[None, :]) / sd
-            out = out - 0.5 * (z * z).sum(axis=1) - np.log(2.0 * np.pi * sd * sd)
-        return out
+        # The velocity law is the drift's stationary one: its invariant density (flat in
+        # position, zero for a model without velocity).
+        return np.logaddexp.reduce(np.array(terms), axis=0) + self.motion.log_invariant_density(particles)
 
 
 @dataclass(frozen=True)
