@@ -99,6 +99,7 @@ class Tracker:
     recovery: RecoverySettings | None = None
     factors: tuple[MoveFactor, ...] = ()
     two_filter: bool = False  # smooth by joining a backward filter (`rafostrack.two_filter`)
+    ffbsm_columns: int = MAX_COLUMNS  # FFBSm: quantile points of each step's cloud (`smoother.smooth`)
 
     @classmethod
     def from_config(cls, config: Config, beacons: BeaconTable, info: FloatInfo) -> Tracker:
@@ -215,7 +216,7 @@ class Tracker:
         clouds, or, with `two_filter` (`_joins_two_filters`), both filters joined
         (`rafostrack.two_filter`)."""
         if not two_filter:
-            return run.steps, smooth([s.cloud for s in run.steps], self.motion)
+            return run.steps, smooth([s.cloud for s in run.steps], self.motion, max_columns=self.ffbsm_columns)
         back = self._run_kept(record, JOIN_COLUMNS, backward=True)
         windows, end = run.steps[:-1], run.steps[-1]
         if run.prior is None or back.prior is None or any(s.window is None for s in windows) or end.window is not None:
@@ -246,7 +247,7 @@ class Tracker:
 
         Without smoothing, each step is summarised as the filter makes it and then dropped,
         so memory does not grow with the record. Smoothing keeps every step's cloud on at
-        most `smoother.MAX_COLUMNS` quantile points of its weights (FFBSm), or each filter's
+        most `ffbsm_columns` quantile points of its weights (FFBSm), or each filter's
         on `two_filter.JOIN_COLUMNS` (`_run_kept`): at most 80 KB per window with a
         velocity, whatever the particle count."""
         float_id = self.info.float_id
@@ -280,7 +281,7 @@ class Tracker:
 
         two_filter = self._joins_two_filters(record)
         run = self._run_kept(
-            record, JOIN_COLUMNS if two_filter else MAX_COLUMNS, label_probs=also_filtered, on_step=summarise
+            record, JOIN_COLUMNS if two_filter else self.ffbsm_columns, label_probs=also_filtered, on_step=summarise
         )
         filter_s = time.perf_counter() - started
         started = time.perf_counter()

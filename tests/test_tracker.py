@@ -104,18 +104,25 @@ def test_methods_name_registered_components():
         assert likelihood in ARRIVAL_LIKELIHOODS and engine in ENGINES
 
 
-@pytest.mark.parametrize("two_filter", [False, True], ids=["ffbsm", "two-filter"])
-def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_mission, two_filter):
-    """The smoothing pass keeps each filter step's cloud on at most MAX_COLUMNS (FFBSm) or
-    JOIN_COLUMNS (two-filter) quantile points, whatever the particle count; with FFBSm, which
-    takes those points anyway, the estimate is the one made from the whole clouds."""
+@pytest.mark.parametrize(
+    ("two_filter", "ffbsm_columns"),
+    [(False, MAX_COLUMNS), (False, 256), (True, MAX_COLUMNS)],
+    ids=["ffbsm", "ffbsm-256-columns", "two-filter"],
+)
+def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_mission, two_filter, ffbsm_columns):
+    """The smoothing pass keeps each filter step's cloud on at most the tracker's
+    `ffbsm_columns` (FFBSm; fewer in the passes that feed calibration) or JOIN_COLUMNS
+    (two-filter) quantile points, whatever the particle count; with FFBSm, which takes
+    those points anyway, the estimate is the one made from the whole clouds."""
     sim = sim_mission.floats[0]
     record = dataclasses.replace(sim.record, windows=sim.record.windows[:30])
     config = with_overrides(
         load_config(), filter={"particles": MAX_COLUMNS + 500, "seed": 1}, smoother={"two_filter": two_filter}
     )
-    tracker = Tracker.from_config(config, sim_mission.beacons, sim.info)
-    columns = JOIN_COLUMNS if two_filter else MAX_COLUMNS
+    tracker = dataclasses.replace(
+        Tracker.from_config(config, sim_mission.beacons, sim.info), ffbsm_columns=ffbsm_columns
+    )
+    columns = JOIN_COLUMNS if two_filter else ffbsm_columns
     kept = tracker._run_kept(record, columns)
     assert all(len(s.cloud.weights) <= columns for s in kept.steps)  # of MAX_COLUMNS + 500 particles
     out = tracker.track(record)
@@ -123,7 +130,7 @@ def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_
     if two_filter:
         return
     run = tracker.run_filter(record, label_probs=False)  # the whole clouds, same draws
-    smoothed = smooth([s.cloud for s in run.steps], tracker.motion)
+    smoothed = smooth([s.cloud for s in run.steps], tracker.motion, max_columns=ffbsm_columns)
     whole = build_estimate(
         sim.info.float_id,
         run.steps,
