@@ -45,11 +45,13 @@ def first_pass_config(config: Config, explicit: Set[tuple[str, str]]) -> Config:
 
 
 def calibration_pass(config: Config) -> Config:
-    """A pass that feeds calibration: at most `[calibrate] max_particles` particles, smoothed
-    by FFBSm alone (no backward filter: its track and labels, not the reported posterior,
-    are what it gives)."""
+    """A pass that feeds calibration: at most `[calibrate] max_particles` particles, always
+    smoothed (its labels and track then use the whole record, whatever the output asks for,
+    so the result does not depend on it), by FFBSm alone (no backward filter: its track and
+    labels, not the reported posterior, are what it gives; on `CALIBRATION_COLUMNS` points,
+    `_feeding_calibration`)."""
     particles = min(config.filter.particles, config.calibrate.max_particles)
-    return with_overrides(config, filter={"particles": particles}, smoother={"two_filter": False})
+    return with_overrides(config, filter={"particles": particles}, smoother={"enabled": True, "two_filter": False})
 
 
 def track_record(
@@ -112,10 +114,8 @@ def track_record(
 
 
 def _feeding_calibration(tracker: Tracker) -> Tracker:
-    """`tracker` for a pass that feeds calibration: always smoothed (its labels and track
-    then use the whole record), whatever the output asks for, so the result does not depend
-    on it; FFBSm on `CALIBRATION_COLUMNS` points."""
-    return dataclasses.replace(tracker, smooth=True, ffbsm_columns=CALIBRATION_COLUMNS)
+    """`tracker` (of a `calibration_pass` config) with FFBSm on `CALIBRATION_COLUMNS` points."""
+    return dataclasses.replace(tracker, ffbsm_columns=CALIBRATION_COLUMNS)
 
 
 def _calibrated_tracker(config: Config, calibration: Calibration) -> Tracker:
