@@ -19,14 +19,13 @@ separated by more than about `link_km` of empty sea are separate modes; cost O(N
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from .geodesy import local_offsets_km
 
-_KEY = np.int64(1) << 32  # cell key = ix * _KEY + iy (cells within +-2^31 of the reference)
-_NEIGHBOURS = ((1, 0), (0, 1), (1, 1), (1, -1))  # each touching pair of cells once
+_KEY = 1 << 32  # cell key = ix * _KEY + iy (cells within +-2^31 of the reference)
+_NEIGHBOURS = np.array([(1, 0), (0, 1), (1, 1), (1, -1)], dtype=np.int64)  # each touching pair of cells once
 
 
 def mode_labels(lat: NDArray, lon: NDArray, weights: NDArray, link_km: float) -> NDArray[np.intp]:
@@ -36,20 +35,59 @@ def mode_labels(lat: NDArray, lon: NDArray, weights: NDArray, link_km: float) ->
     ix, iy = np.floor(east / link_km).astype(np.int64), np.floor(north / link_km).astype(np.int64)
     if np.ptp(ix) <= 1 and np.ptp(iy) <= 1:  # at most 2 x 2 cells: all touch, one mode
         return np.zeros(len(weights), dtype=np.intp)
-    key = ix * _KEY + iy
-    cells, cell_of = np.unique(key, return_inverse=True)
-    rows, cols = [], []
-    for dx, dy in _NEIGHBOURS:
-        target = cells + dx * _KEY + dy
-        at = np.searchsorted(cells, target)
-        found = (at < len(cells)) & (cells[np.minimum(at, len(cells) - 1)] == target)
-        rows.append(np.flatnonzero(found))
-        cols.append(at[found])
-    r, c = np.concatenate(rows), np.concatenate(cols)
-    graph = coo_matrix((np.ones(len(r)), (r, c)), shape=(len(cells), len(cells)))
-    n_modes, cell_label = connected_components(graph, directed=False)
-    labels = cell_label[cell_of]
+    labels, n_modes = _cell_components(ix * _KEY + iy, _NEIGHBOURS)
     mass = np.bincount(labels, weights=weights, minlength=n_modes)
     rank = np.empty(n_modes, dtype=np.intp)
     rank[np.argsort(-mass, kind="stable")] = np.arange(n_modes)
     return rank[labels]
+
+
+@njit(cache=True, nogil=True)
+def _cell_components(key, neighbours):  # pragma: no cover - compiled
+    """Per particle, the connected component of its cell among the occupied cells (cells
+    touching by `neighbours` offsets, each pair once), and the number of components; the
+    components numbered in the order of their first cells by key. Union-find over the
+    cells sorted by key, each neighbour found by binary search: O(N log N)."""
+    n = key.shape[0]
+    order = np.argsort(key, kind="mergesort")
+    cells = np.empty(n, dtype=np.int64)
+    cell_of = np.empty(n, dtype=np.int64)
+    m = 0
+    for t in range(n):
+        p = order[t]
+        if m == 0 or key[p] != cells[m - 1]:
+            cells[m] = key[p]
+            m += 1
+        cell_of[p] = m - 1
+    cells = cells[:m]
+    parent = np.arange(m)
+    for c in range(m):
+        for q in range(neighbours.shape[0]):
+            target = cells[c] + neighbours[q, 0] * _KEY + neighbours[q, 1]
+            at = np.searchsorted(cells, target)
+            if at < m and cells[at] == target:
+                a, b = _root(parent, c), _root(parent, at)
+                if a != b:
+                    parent[max(a, b)] = min(a, b)
+    component = np.full(m, -1, dtype=np.int64)
+    cell_label = np.empty(m, dtype=np.int64)
+    count = 0
+    for c in range(m):
+        r = _root(parent, c)
+        if component[r] < 0:
+            component[r] = count
+            count += 1
+        cell_label[c] = component[r]
+    labels = np.empty(n, dtype=np.intp)
+    for p in range(n):
+        labels[p] = cell_label[cell_of[p]]
+    return labels, count
+
+
+@njit(cache=True, nogil=True)
+def _root(parent, c):  # pragma: no cover - compiled
+    """The root of cell c's tree, halving the path on the way."""
+    while parent[c] != c:
+        parent[c] = parent[parent[c]]
+        c = parent[c]
+    return c

@@ -9,7 +9,8 @@
        its hyperparameters (drift, noise, clock wander) by maximum marginal likelihood.
     3. Filter and smoother with the calibrated model; calibration again from that pass's
        labels and track, `[calibrate] iterations` times in all (each pass's positions are
-       better than the last, and so is the next calibration); the last pass is the result.
+       better than the last, and so is the next calibration; its hyperparameter search
+       starts where the last ended); the last pass is the result.
        The position variance that the calibration leaves undetermined (`Calibration.
        nuisance_cov_km2`) is added to the last pass's covariance.
 
@@ -83,7 +84,8 @@ def track_record(
     calibration: Calibration | None = None
     for iteration in range(config.calibrate.iterations):
         started = time.perf_counter()
-        fitted = calibrate(out.estimate, record, beacons, info, config, set(explicit))
+        start = calibration.hyper if calibration is not None else None
+        fitted = calibrate(out.estimate, record, beacons, info, config, set(explicit), start=start)
         spent["calibrate_s"] += time.perf_counter() - started
         if fitted is None:
             break

@@ -46,8 +46,8 @@ class AssociationFactors:
 
     log_match: NDArray[np.float64]  # (P, s, K): log w_ij
     log_unheard: NDArray[np.float64]  # (P, s): log u_i
-    log_base: float  # K log Lambda - Lambda h, shared by all particles
-    log_echo: NDArray[np.float64] | None = None  # (K, K): log E_jj', the echo pair terms (None: no echoes)
+    log_base: float | NDArray[np.float64]  # K log Lambda - Lambda h, shared by all particles (or (P,): a batch)
+    log_echo: NDArray[np.float64] | None = None  # (K, K) or (P, K, K): log E_jj', the echo pair terms (None: none)
 
 
 @dataclass(frozen=True)
@@ -139,9 +139,14 @@ def clutter_intensity(model: ModelConfig, window_s: float) -> float:
     return model.clutter_rate / window_s
 
 
-def horizon_s(toa_s: NDArray, max_signals: int, window_s: float) -> float:
-    """Time after which an unstored signal may lie: last TOA if full, else window end."""
-    return float(toa_s[-1]) if len(toa_s) >= max_signals else window_s
+def horizon_s(toa_s: NDArray, max_signals: int, window_s: float) -> float | NDArray[np.float64]:
+    """Time after which an unstored signal may lie: last TOA if full, else window end; for
+    a batch of windows with K signals each, (P, K), one per row."""
+    toa = np.asarray(toa_s, dtype=np.float64)
+    full = toa.shape[-1] >= max_signals
+    if toa.ndim == 1:
+        return float(toa[-1]) if full else window_s
+    return toa[:, -1].copy() if full else np.full(len(toa), window_s)
 
 
 def association_factors(
@@ -157,6 +162,8 @@ def association_factors(
 ) -> AssociationFactors:
     """The window's factors w_ij, u_i and the shared term (see module docstring).
 
+    `toa_s` (K,), or (P, K) for a batch of windows with the same number of beacons and K signals,
+    one window per particle (the shared term and echo terms then have a row per particle).
     `ranked=False` gives the unranked baseline of eq. (19): an unheard beacon costs
     1 - Pd whatever its predicted arrival. `source_log_ratio` (K,): per signal, evidence
     that it came from a source rather than clutter (`rafostrack.quality`: its correlation
@@ -166,17 +173,17 @@ def association_factors(
     h = horizon_s(toa_s, max_signals, window_s)
     mu = np.ascontiguousarray(mu_s, dtype=np.float64)
     n, s = mu.shape
-    k = len(toa_s)
+    k = np.shape(toa_s)[-1]
     log_match, log_unheard = np.empty((n, s, k)), np.empty((n, s))
     factors_kernel(
         mu,
         np.ascontiguousarray(np.broadcast_to(p_detect, mu.shape), dtype=np.float64),
-        np.ascontiguousarray(toa_s, dtype=np.float64),
+        np.ascontiguousarray(np.atleast_2d(toa_s), dtype=np.float64),
         model.toa_sigma_s,
         model.multipath_fraction,
         model.multipath_delay_s,
         float(np.log(lam)),
-        h,
+        np.atleast_1d(np.asarray(h, dtype=np.float64)),
         ranked,
         log_match,
         log_unheard,
@@ -184,25 +191,28 @@ def association_factors(
     log_echo = None
     if model.echo_fraction > 0 and k:
         no_echo, log_echo = echo_factors(toa_s, h, lam, model)
-        log_match = log_match + no_echo[None, None, :]
+        log_match = log_match + no_echo[..., None, :]
     if source_log_ratio is not None and k:
         log_match = log_match + source_log_ratio[None, None, :]
         log_echo = None if log_echo is None else log_echo + source_log_ratio[None, :]
     return AssociationFactors(log_match, log_unheard, k * np.log(lam) - lam * h, log_echo)
 
 
-def echo_factors(toa_s: NDArray, horizon: float, lam: float, model: ModelConfig) -> tuple[NDArray, NDArray]:
+def echo_factors(toa_s: NDArray, horizon: float | NDArray, lam: float, model: ModelConfig) -> tuple[NDArray, NDArray]:
     """The echo terms of one window, shared by every particle and beacon (module docstring):
     log(1 - e G(h - T_j)) per signal, folded into the match factor of a direct arrival
     without a stored echo, and log E_jj' = log(e g(T_j' - T_j) / Lambda) - log(1 - e G(h - T_j))
-    for j < j' (-inf elsewhere), with g the delay density Exp(mean tau) and G its CDF."""
+    for j < j' (-inf elsewhere), with g the delay density Exp(mean tau) and G its CDF.
+    Shapes (K,) and (K, K); for a batch of windows (`toa_s` (P, K), `horizon` (P,)), a row each."""
     eps, tau = model.echo_fraction, model.multipath_delay_s
-    no_echo = np.log1p(-eps * -np.expm1(-np.clip(horizon - toa_s, 0.0, None) / tau))
-    delay = toa_s[None, :] - toa_s[:, None]  # (j, j'): T_j' - T_j
-    later = np.triu(np.ones((len(toa_s), len(toa_s)), dtype=bool), k=1)
+    toa = np.asarray(toa_s)
+    k = toa.shape[-1]
+    no_echo = np.log1p(-eps * -np.expm1(-np.clip(np.asarray(horizon)[..., None] - toa, 0.0, None) / tau))
+    delay = toa[..., None, :] - toa[..., :, None]  # (j, j'): T_j' - T_j
+    later = np.triu(np.ones((k, k), dtype=bool), k=1)
     with np.errstate(divide="ignore"):
         log_pair = np.where(later, np.log(eps / tau) - np.clip(delay, 0.0, None) / tau - np.log(lam), -np.inf)
-    return no_echo, log_pair - no_echo[:, None]
+    return no_echo, log_pair - no_echo[..., :, None]
 
 
 def labeled_loglik(

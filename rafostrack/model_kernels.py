@@ -124,23 +124,27 @@ def log_ndtr_ufunc(z):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def factors_kernel(mu, p_detect, toa, sigma, eps, tau, log_lam, h, ranked, log_match, log_unheard):  # pragma: no cover
-    """log w_ij (P, s, K) and log u_i (P, s) of one window (module docstring)."""
+    """log w_ij (P, s, K) and log u_i (P, s) of one window (module docstring): `toa`
+    (1 or P, K) and the horizon `h` (1 or P,), one row shared by all particles, or one per
+    particle (a batch of windows)."""
     n, s = mu.shape
-    k = toa.shape[0]
+    k = toa.shape[1]
+    shared = toa.shape[0] == 1
     c = constants(sigma, eps, tau)
     early = -FAR_EARLY * sigma
     late = FAR_LATE * tau if eps > 0.0 else FAR_LATE_DIRECT * sigma
     for p in range(n):
+        row = 0 if shared else p
         for i in range(s):
             log_pd = math.log(p_detect[p, i])
             for j in range(k):
-                r = toa[j] - mu[p, i]
+                r = toa[row, j] - mu[p, i]
                 if r < early or r > late:
                     log_match[p, i, j] = -np.inf
                 else:
                     log_match[p, i, j] = log_pd + logpdf_c(r, c) - log_lam
             if ranked:
-                p_in = cdf_c(h - mu[p, i], c) - cdf_c(-mu[p, i], c)
+                p_in = cdf_c(h[row] - mu[p, i], c) - cdf_c(-mu[p, i], c)
                 log_unheard[p, i] = math.log1p(-p_detect[p, i] * min(max(p_in, 0.0), 1.0))
             else:
                 log_unheard[p, i] = math.log1p(-p_detect[p, i])

@@ -2,8 +2,9 @@
 
 Positions are taken in the east/north tangent plane (km) of the heaviest particle, which
 is accurate to well under the particle spread at the scales of a float posterior.
-Weighted sums use `np.einsum` (numpy's own loops), never BLAS, whose threaded reductions
-round differently with the thread count: results are the same bit for bit on any machine.
+Weighted sums use `np.einsum` (numpy's own loops) or compiled loops (the 2-means split),
+never BLAS, whose threaded reductions round differently with the thread count: results are
+the same bit for bit on any machine.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
@@ -153,16 +155,7 @@ def two_modes(
             first, second = _to_gaussian(ref_lat, ref_lon, m1, c1), _to_gaussian(ref_lat, ref_lon, m2, c2)
             return Modes(whole, first, second, w1, w2, float(np.hypot(*(m2 - m1))), ambiguous, True)
     axis = np.linalg.eigh(cov)[1][:, 1]
-    side = np.einsum("pk,k->p", xy - mean, axis) > 0
-    for _ in range(iterations):
-        if side.all() or not side.any():
-            break
-        m1 = _weighted_mean(xy[side], weights[side])
-        m0 = _weighted_mean(xy[~side], weights[~side])
-        new_side = ((xy - m1) ** 2).sum(axis=1) < ((xy - m0) ** 2).sum(axis=1)
-        if np.array_equal(new_side, side):
-            break
-        side = new_side
+    side = _two_means(xy, weights, np.einsum("pk,k->p", xy - mean, axis) > 0, iterations)
     whole = _to_gaussian(ref_lat, ref_lon, mean, cov + kernel)
     if side.all() or not side.any():
         return Modes(whole, whole, whole, 1.0, 0.0, 0.0, False)
@@ -181,3 +174,33 @@ def two_modes(
     ambiguous = w2 >= min_weight and d >= min_separation_km and d >= separation_factor * (s1 + s2)
     first, second = _to_gaussian(ref_lat, ref_lon, m1, c1), _to_gaussian(ref_lat, ref_lon, m2, c2)
     return Modes(whole, first, second, w1, w2, d, bool(ambiguous))
+
+
+@njit(cache=True, nogil=True)
+def _two_means(xy, weights, side, iterations):  # pragma: no cover - compiled
+    """Weighted 2-means (Lloyd) from the split `side`: each point to the nearer of the two
+    clusters' weighted means, until no point moves, a cluster empties or `iterations`."""
+    n = xy.shape[0]
+    side = side.copy()
+    for _ in range(iterations):
+        total = np.zeros((2, 3))  # per cluster: sum w, sum w x, sum w y
+        for p in range(n):
+            c = 1 if side[p] else 0
+            total[c, 0] += weights[p]
+            total[c, 1] += weights[p] * xy[p, 0]
+            total[c, 2] += weights[p] * xy[p, 1]
+        if total[0, 0] == 0.0 or total[1, 0] == 0.0:  # (the zero-weight points were dropped)
+            break
+        moved = False
+        for p in range(n):
+            d = np.zeros(2)
+            for c in range(2):
+                dx = xy[p, 0] - total[c, 1] / total[c, 0]
+                dy = xy[p, 1] - total[c, 2] / total[c, 0]
+                d[c] = dx * dx + dy * dy
+            new = d[1] < d[0]
+            moved = moved or new != side[p]
+            side[p] = new
+        if not moved:
+            break
+    return side

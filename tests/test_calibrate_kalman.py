@@ -254,7 +254,9 @@ def test_position_covariances_match_the_dense_posterior(end_fix):
 
 def test_fit_hyper_maximises_dense_evidence_plus_hyperprior():
     """No step of 10% along any hyperparameter raises the oracle's log evidence + the weak
-    log-normal hyperprior (written here) above the value at fit_hyper's answer."""
+    log-normal hyperprior (written here) above the value at fit_hyper's answer by more than
+    the search's stopping rule allows: a gradient under 0.1 nats per unit of log
+    hyperparameter, so a 10% step (0.095 in log) gains at most ~0.01 nats."""
     problem, days = _small_problem(seed=6, end_fix=True, n_nodes=12, n_heard=4)
     u = np.zeros(problem.n_unknowns)
     weight = np.ones(len(problem.toa_s))
@@ -273,7 +275,7 @@ def test_fit_hyper_maximises_dense_evidence_plus_hyperprior():
             moved[j] *= factor
             lower, upper = kalman.Hyper.LOWER[j], kalman.Hyper.UPPER[j]
             if lower <= moved[j] <= upper:
-                assert objective(kalman.Hyper(*moved)) <= at_best + 1e-4, (j, factor)
+                assert objective(kalman.Hyper(*moved)) <= at_best + 0.01, (j, factor)
     assert abs(best.toa_sigma_s - 1.5) < 0.8  # the simulated noise sd is 1.5 s (+ offsets taken up by a_i)
 
 

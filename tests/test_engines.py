@@ -169,6 +169,25 @@ def test_exact_with_echoes_matches_oracle(seed: int) -> None:
     assert_matches_oracle(result, log_match, log_unheard, 1e-9, log_echo)
 
 
+@pytest.mark.parametrize("seed", range(10))
+def test_exact_with_echoes_per_particle_matches_oracle(seed: int) -> None:
+    """One echo table per particle (a batch of windows, `calibrate.association`): each
+    particle's sum and marginals are those of its own table, some pairs of some tables
+    being absent (-inf) while other tables have them."""
+    rng = np.random.default_rng(1000 + seed)
+    n, s, k = 3, int(rng.integers(1, 5)), int(rng.integers(2, 5))
+    log_match = rng.uniform(-4.0, 4.0, (n, s, k))
+    log_unheard = rng.uniform(-2.0, 1.0, (n, s))
+    later = np.triu(np.ones((k, k), dtype=bool), 1)
+    log_echo = np.where(later, rng.uniform(-6.0, 4.0, (n, k, k)), -np.inf)
+    log_echo[rng.random((n, k, k)) < 0.3] = -np.inf
+    result = exact.associate(log_match, log_unheard, log_echo=log_echo)
+    for p in range(n):
+        log_z, p_match = oracle(log_match[p : p + 1], log_unheard[p : p + 1], log_echo[p])
+        np.testing.assert_allclose(result.log_z[p], log_z[0], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(result.p_match[p], p_match[0], rtol=0, atol=1e-9)
+
+
 def test_echo_factors_of_a_realistic_window_match_oracle() -> None:
     """The model's echo terms (`model.echo_factors`) through the exact engine: two arrivals
     20 s apart near one beacon's prediction are both that beacon's, not one and clutter

@@ -73,6 +73,25 @@ def test_likelihood_with_echoes_integrates_to_one_r2():
     assert p0 + p1 + p2 == pytest.approx(1.0, abs=1e-6)
 
 
+@pytest.mark.parametrize("n_signals", [2, 4])  # partial windows (horizon W) and full ones (the last TOA)
+def test_a_batch_of_windows_has_each_window_s_factors(n_signals):
+    """Windows stacked one per particle (toa (P, K)) get the factors, shared term and echo
+    terms each would get alone."""
+    model = _model(toa_sigma_s=2.0, clutter_rate=1.5, multipath_fraction=0.1, echo_fraction=0.05)
+    rng = np.random.default_rng(7)
+    mu = rng.uniform(100.0, 3000.0, (5, 3))
+    p_detect = rng.uniform(0.3, 0.9, (5, 3))
+    toa = np.sort(rng.uniform(0.0, model.window_s, (5, n_signals)), axis=1)
+    kwargs = {"max_signals": 4, "window_s": model.window_s, "model": model}
+    batch = m.association_factors(mu, p_detect, toa, **kwargs)
+    for p in range(5):
+        alone = m.association_factors(mu[p : p + 1], p_detect[p : p + 1], toa[p], **kwargs)
+        np.testing.assert_array_equal(batch.log_match[p], alone.log_match[0])
+        np.testing.assert_array_equal(batch.log_unheard[p], alone.log_unheard[0])
+        np.testing.assert_array_equal(batch.log_echo[p], alone.log_echo)
+        assert batch.log_base[p] == alone.log_base
+
+
 def test_ranking_penalises_a_beacon_predicted_early_but_not_stored():
     """A full window whose TOAs all come after beacon 0's prediction: positions that put
     beacon 0 early are unlikely under the ranked model, indifferent under the baseline."""

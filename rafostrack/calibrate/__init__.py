@@ -69,6 +69,7 @@ class Calibration:
     report: dict[str, Any] = field(default_factory=dict)
     nuisance_time: NDArray[np.datetime64] = field(default_factory=lambda: np.zeros(0, "datetime64[ns]"))
     nuisance_cov_km2: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    hyper: kalman.Hyper | None = None  # the Kalman smoother's fitted hyperparameters
 
     def apply(self, config: Config) -> Config:
         """`config` with the estimated keys set."""
@@ -221,9 +222,12 @@ def calibrate(
     info: FloatInfo,
     config: Config,
     explicit: set[tuple[str, str]] = frozenset(),  # type: ignore[assignment]
+    start: kalman.Hyper | None = None,
 ) -> Calibration | None:
     """Estimate the record's nuisances from a first pass's `estimate` (module docstring);
-    None when it has too few confident arrivals. Keys in `explicit` keep their values."""
+    None when it has too few confident arrivals. Keys in `explicit` keep their values. The
+    hyperparameter search starts at `start` (a previous calibration's `hyper`: the optimum
+    moves little between passes) or else at the configured values."""
     built = _problem(estimate, beacons, info, config)
     if built is None:
         return None
@@ -239,9 +243,13 @@ def calibrate(
         return direct_probability(residual_s, noise["model"])
 
     motion = config.motion
-    start = kalman.Hyper(
-        motion.velocity_sd_km_per_day, motion.decorrelation_days, model.toa_sigma_s, INITIAL_CLOCK_RATE_SD_S_PER_DAY
-    )
+    if start is None:
+        start = kalman.Hyper(
+            motion.velocity_sd_km_per_day,
+            motion.decorrelation_days,
+            model.toa_sigma_s,
+            INITIAL_CLOCK_RATE_SD_S_PER_DAY,
+        )
     # A sound speed the user set is held: its corrections get a prior sd of 1 mm/s.
     speeds_fitted = ("model", "sound_speed_m_s") not in explicit
     priors = (
@@ -306,4 +314,4 @@ def calibrate(
             "median": round(float(np.median(np.sqrt(np.trace(fit.nuisance_cov_km2, axis1=1, axis2=2)))), 3)
         },
     }
-    return Calibration(values, corrected, clocked, report, problem.time, fit.nuisance_cov_km2)
+    return Calibration(values, corrected, clocked, report, problem.time, fit.nuisance_cov_km2, hyper)

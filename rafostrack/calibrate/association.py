@@ -7,7 +7,8 @@ counts. At the calibrated track x (every window's position, interpolated between
 smoother's nodes), with the calibrated timing:
 
 E-step: per window, the exact association marginals at x (`engines.exact`: P(signal j is
-    beacon i's first arrival), P(... its echo), P(clutter)), the first arrival split into
+    beacon i's first arrival), P(... its echo), P(clutter); one engine call for all the
+    windows with the same numbers of beacons and signals), the first arrival split into
     direct and delayed by the error density's components, P(delayed | r) = eps EMG(r) / f(r)
     (`model.toa_logpdf`), r = T_j - mu_i; and the delay's posterior mean given it was
     delayed, E[d | r] = m + sigma phi(m / sigma) / Phi(m / sigma), m = r - sigma^2 / tau
@@ -27,6 +28,7 @@ prediction is not taken for multipath.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,6 +52,29 @@ def _delay_mean(resid_s: NDArray, sigma: float, tau: float) -> NDArray:
     return mean + sigma * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z))
 
 
+@dataclass(frozen=True)
+class _Batch:
+    """The windows with the same numbers of active beacons (s) and stored signals (K), one
+    row each: the E-step's association runs on them at once (`model.association_factors`
+    takes a batch of windows)."""
+
+    mu_s: NDArray[np.float64]  # (n, s) predicted arrival times at the track
+    p_detect: NDArray[np.float64]  # (n, s)
+    toa_s: NDArray[np.float64]  # (n, K)
+
+
+def _batches(
+    record: ArrivalRecord, lat: NDArray, lon: NDArray, beacons: BeaconTable, info: FloatInfo, model: ModelConfig
+) -> list[_Batch]:
+    """The record's windows with signals, predicted at the track and grouped by shape."""
+    rows: dict[tuple[int, int], list[tuple[NDArray, NDArray, NDArray]]] = {}
+    for w, la, lo in zip(record.windows, lat, lon, strict=True):
+        if w.n_signals:
+            _, mu, p_detect = m.window_prediction(beacons, info, model, np.array([la]), np.array([lo]), w.time)
+            rows.setdefault((mu.shape[1], w.n_signals), []).append((mu[0], p_detect[0], w.toa_s))
+    return [_Batch(*(np.array(column) for column in zip(*group, strict=True))) for group in rows.values()]
+
+
 def fit_association(
     record: ArrivalRecord,
     lat: NDArray,
@@ -65,26 +90,20 @@ def fit_association(
     fitted = model
     # The predictions at the track (arrival times, detection) do not change with the fitted
     # parameters: computed once.
-    e_model = dataclasses.replace(fitted, toa_sigma_s=sigma_e)
-    windows = [
-        (w, *m.window_prediction(beacons, info, e_model, np.array([la]), np.array([lo]), w.time)[1:])
-        for w, la, lo in zip(record.windows, lat, lon, strict=True)
-        if w.n_signals
-    ]
-    p_clutter = np.zeros(sum(w.n_signals for w, _, _ in windows))
+    batches = _batches(record, lat, lon, beacons, info, dataclasses.replace(fitted, toa_sigma_s=sigma_e))
     for _ in range(ITERATIONS):
         e_model = dataclasses.replace(fitted, toa_sigma_s=sigma_e)
         first = delayed = delay_sum = echoes = echo_chances = 0.0
-        at = 0
-        for window, mu, p_detect in windows:
-            h = m.horizon_s(window.toa_s, info.max_signals, info.window_s)
+        p_clutter = [np.zeros(0)]  # per batch, (n K,)
+        for b in batches:
+            h = np.asarray(m.horizon_s(b.toa_s, info.max_signals, info.window_s))  # (n,)
             f = m.association_factors(
-                mu, p_detect, window.toa_s, max_signals=info.max_signals, window_s=info.window_s, model=e_model
+                b.mu_s, b.p_detect, b.toa_s, max_signals=info.max_signals, window_s=info.window_s, model=e_model
             )
             assoc = exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo)
-            p_echo = assoc.p_echo[0] if assoc.p_echo is not None else np.zeros_like(assoc.p_match[0])
-            p_first = assoc.p_match[0] - p_echo  # (s, K)
-            resid = window.toa_s[None, :] - mu[0][:, None]
+            p_echo = assoc.p_echo if assoc.p_echo is not None else np.zeros_like(assoc.p_match)
+            p_first = assoc.p_match - p_echo  # (n, s, K)
+            resid = b.toa_s[:, None, :] - b.mu_s[:, :, None]
             p_delayed = 1.0 - direct_probability(resid, e_model)
             first += p_first.sum()
             delayed += float(np.sum(p_first * p_delayed))
@@ -93,18 +112,17 @@ def fit_association(
             echoes += p_echo.sum()
             # An echo of beacon i at T_j is delayed from i's first arrival, taken at its
             # expected time under the marginals; its delay informs tau as multipath's does.
-            heard = p_first.sum(axis=1)
-            first_toa = (p_first @ window.toa_s) / np.where(heard > 0, heard, 1.0)
-            echo_delay = np.clip(window.toa_s[None, :] - first_toa[:, None], 0.0, None)
+            heard = p_first.sum(axis=2)
+            first_toa = np.einsum("nsk,nk->ns", p_first, b.toa_s) / np.where(heard > 0, heard, 1.0)
+            echo_delay = np.clip(b.toa_s[:, None, :] - first_toa[:, :, None], 0.0, None)
             delay_sum += float(np.sum(p_echo * echo_delay))
-            stored = -np.expm1(-np.clip(h - window.toa_s, 0.0, None) / fitted.multipath_delay_s)  # G(h - T_j)
-            echo_chances += float(np.sum(p_first * stored[None, :]))
-            p_clutter[at : at + window.n_signals] = assoc.p_clutter[0]
-            at += window.n_signals
+            stored = -np.expm1(-np.clip(h[:, None] - b.toa_s, 0.0, None) / fitted.multipath_delay_s)  # G(h - T_j)
+            echo_chances += float(np.sum(p_first * stored[:, None, :]))
+            p_clutter.append(assoc.p_clutter.ravel())
         eps = float(np.clip(delayed / max(first, 1e-9), MIN_FRACTION, 0.5))
         tau = float(np.clip(delay_sum / max(delayed + echoes, 1e-9), 5.0, 200.0))
         echo = float(np.clip(echoes / max(echo_chances, 1e-9), MIN_FRACTION, 0.5))
-        clutter = max(fit_clutter_rate(p_clutter, record, info), 0.05)
+        clutter = max(fit_clutter_rate(np.concatenate(p_clutter), record, info), 0.05)
         fitted = dataclasses.replace(
             fitted, multipath_fraction=eps, multipath_delay_s=tau, echo_fraction=echo, clutter_rate=clutter
         )

@@ -412,9 +412,14 @@ def fit_hyper(lin: Linearised, hyper: Hyper) -> Hyper:
 
     bounds = list(zip(np.log(Hyper.LOWER), np.log(Hyper.UPPER), strict=True))
     start = np.clip(hyper.vector(), *np.log([Hyper.LOWER, Hyper.UPPER]))
-    # ftol 1e-7: a relative change of the log evidence (~10^3 nats) below ~1e-4 nats stops
-    # the search; hyperparameters closer to the optimum than that make no difference.
-    best = minimize(cost, start, method="L-BFGS-B", bounds=bounds, options={"eps": 1e-4, "ftol": 1e-7, "maxiter": 50})
+    # The search stops when the log evidence (~10^3 nats) changes by less than ~1e-4 nats
+    # (ftol) or its gradient is below 0.1 nats per unit of log hyperparameter (gtol: a 10%
+    # change of any hyperparameter then gains at most ~0.01 nats); hyperparameters closer to
+    # the optimum than that make no difference. Without gtol, a search started at the
+    # optimum (the later linearisations, a warm start) spends its evaluations on line
+    # searches along a forward-difference gradient's rounding error.
+    options = {"eps": 1e-4, "ftol": 1e-7, "gtol": 0.1, "maxiter": 50}
+    best = minimize(cost, start, method="L-BFGS-B", bounds=bounds, options=options)
     return Hyper.from_vector(best.x)
 
 

@@ -30,8 +30,10 @@ LOG_NEGLIGIBLE = -690.0  # exp below ~1e-300: the term is 0
 @njit(cache=True, nogil=True, boundscheck=False)
 def _weights(log_match, log_unheard, p0, nl, pair_j, pair_e, w, pw, active, active_pair):  # pragma: no cover
     """w[i, j, l] = exp(log_match - log_unheard) of particle p0 + l; pw[i, q, l] =
-    w[i, pair_j[q], l] * E_q; and whether any lane of the block has a term above 1e-300
-    (the others are skipped)."""
+    w[i, pair_j[q], l] * E_q (E of the particle's row of `pair_e`: one row shared by all,
+    or one per particle); and whether any lane of the block has a term above 1e-300 (the
+    others are skipped)."""
+    shared = pair_e.shape[0] == 1
     s, k = log_match.shape[1], log_match.shape[2]
     for i in range(s):
         for j in range(k):
@@ -44,7 +46,7 @@ def _weights(log_match, log_unheard, p0, nl, pair_j, pair_e, w, pw, active, acti
         for q in range(pair_j.shape[0]):
             any_term = False
             for lane in range(nl):
-                pw[i, q, lane] = w[i, pair_j[q], lane] * pair_e[q]
+                pw[i, q, lane] = w[i, pair_j[q], lane] * pair_e[0 if shared else p0 + lane, q]
                 any_term = any_term or pw[i, q, lane] > 0.0
             active_pair[i, q] = any_term
 
@@ -114,9 +116,11 @@ def associate_kernel(
     log_match, log_unheard, pair_j, pair_jj, log_e, marginals, log_z, p_match, p_echo
 ):  # pragma: no cover
     """Fill log_z (P,) (log Z less sum_i log u_i), and with `marginals` p_match and p_echo
-    (P, s, K), from log w_ij (P, s, K), log u_i (P, s) and the echo pairs (j, j', log E_jj');
-    each beacon's factors are divided by u_i (module docstring of `exact`)."""
+    (P, s, K), from log w_ij (P, s, K), log u_i (P, s) and the echo pairs (j, j') with their
+    log E_jj' (1 or P, pairs: shared, or per particle); each beacon's factors are divided by
+    u_i (module docstring of `exact`)."""
     n, s, k = log_match.shape
+    shared = log_e.shape[0] == 1
     n_masks = 1 << k
     n_pairs = pair_j.shape[0]
     pair_e = np.exp(log_e)
@@ -200,7 +204,7 @@ def associate_kernel(
                     if acc <= 0.0:
                         continue
                     log_wq = log_match[p0 + lane, i, pair_j[q]] - log_unheard[p0 + lane, i]
-                    pair = math.exp(math.log(acc) + log_wq + log_e[q] + rel)
+                    pair = math.exp(math.log(acc) + log_wq + log_e[0 if shared else p0 + lane, q] + rel)
                     p_match[p0 + lane, i, pair_j[q]] += pair
                     p_match[p0 + lane, i, pair_jj[q]] += pair
                     p_echo[p0 + lane, i, pair_jj[q]] += pair

@@ -36,8 +36,10 @@ def associate(
 ) -> Association:
     """Exact log Z and pair marginals (see module docstring); refuses K > 12.
 
-    `log_echo` (K, K): the echo pair terms log E_jj' (`model.echo_factors`); a beacon may
-    then take a pair j < j' with weight w_ij E_jj', and both signals are its own.
+    `log_echo` (K, K), or (P, K, K) for one window per particle (a batch of windows with
+    the same numbers of beacons and signals): the echo pair terms log E_jj'
+    (`model.echo_factors`); a beacon may then take a pair j < j' with weight w_ij E_jj',
+    and both signals are its own.
     `marginals=False` runs the forward pass only (a third of the cost) and returns NaN
     marginals.
     """
@@ -71,11 +73,13 @@ def associate(
 
 
 def _pairs(log_echo: NDArray | None, k: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-    """The echo pairs j < j' with E_jj' > 0: their signal indices and log E."""
+    """The echo pairs j < j' with E_jj' > 0 (for some particle): their signal indices and
+    log E, (1, pairs) or (P, pairs)."""
     if log_echo is None:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-    j, jj = np.nonzero(np.triu(np.isfinite(log_echo), 1))
-    return j.astype(np.int64), jj.astype(np.int64), np.ascontiguousarray(log_echo[j, jj], dtype=np.float64)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((1, 0))
+    rows = log_echo.reshape(-1, k, k)
+    j, jj = np.nonzero(np.triu(np.isfinite(rows).any(axis=0), 1))
+    return j.astype(np.int64), jj.astype(np.int64), np.ascontiguousarray(rows[:, j, jj], dtype=np.float64)
 
 
 def from_config(_config: Config) -> Engine:
