@@ -65,14 +65,11 @@ class Modes:
         return self.first if self.ambiguous or self.parted else self.whole
 
 
-def _weighted_mean(xy: NDArray, w: NDArray) -> NDArray:
-    return np.einsum("p,pk->k", w, xy) / w.sum()
-
-
 def _weighted_mean_cov(xy: NDArray, w: NDArray) -> tuple[NDArray, NDArray]:
-    mean = _weighted_mean(xy, w)
+    total = w.sum()
+    mean = np.einsum("p,pk->k", w, xy) / total
     d = xy - mean
-    return mean, np.einsum("p,pi,pj->ij", w, d, d) / w.sum()
+    return mean, np.einsum("p,pi,pj->ij", w, d, d) / total
 
 
 def _to_gaussian(ref_lat: float, ref_lon: float, mean: NDArray, cov: NDArray) -> Gaussian2D:
@@ -191,14 +188,11 @@ def _two_means(xy, weights, side, iterations):  # pragma: no cover - compiled
             total[c, 2] += weights[p] * xy[p, 1]
         if total[0, 0] == 0.0 or total[1, 0] == 0.0:  # (the zero-weight points were dropped)
             break
+        x0, y0 = total[0, 1] / total[0, 0], total[0, 2] / total[0, 0]
+        x1, y1 = total[1, 1] / total[1, 0], total[1, 2] / total[1, 0]
         moved = False
         for p in range(n):
-            d = np.zeros(2)
-            for c in range(2):
-                dx = xy[p, 0] - total[c, 1] / total[c, 0]
-                dy = xy[p, 1] - total[c, 2] / total[c, 0]
-                d[c] = dx * dx + dy * dy
-            new = d[1] < d[0]
+            new = (xy[p, 0] - x1) ** 2 + (xy[p, 1] - y1) ** 2 < (xy[p, 0] - x0) ** 2 + (xy[p, 1] - y0) ** 2
             moved = moved or new != side[p]
             side[p] = new
         if not moved:
