@@ -31,7 +31,7 @@ from .domain import Cloud, days_between
 from .geodesy import local_offsets_km
 from .motion import LinearGaussian, MotionModel
 from .resampling import quantile_points
-from .smoother_kernel import backward_kernel
+from .smoother_kernel import backward_weights
 
 # Particles whose weight is below this fraction of the largest weight are left out of the
 # O(N^2) products; their contribution is below float64 resolution of the result.
@@ -69,7 +69,7 @@ def whitened(
         if weight <= 0:
             continue
         white = kernel.whitening(_MIN_SD_KM)
-        za.append(np.einsum("kl,lm,im->ik", white, kernel.A, origins))
+        za.append(np.einsum("km,im->ik", np.einsum("kl,lm->km", white, kernel.A), origins))
         zb.append(np.einsum("kl,jl->jk", white, destinations - kernel.b))
         log_norm.append(np.log(weight) + float(np.linalg.slogdet(white)[1]) - 0.5 * kernel.dim * _LOG_2PI)
     return np.ascontiguousarray(za), np.ascontiguousarray(zb), np.array(log_norm)
@@ -95,10 +95,8 @@ def backward_step(
     za, zb, log_norm = whitened(
         components, plane_states(now, keep_i, ref_lat, ref_lon), plane_states(nxt, rows, ref_lat, ref_lon)
     )
-    out = np.empty(len(keep_i))
-    backward_kernel(za, zb, log_norm, np.log(now.weights[keep_i]), v, out)
     result = np.zeros_like(now.weights)
-    result[keep_i] = out
+    result[keep_i] = backward_weights(za, zb, log_norm, np.log(now.weights[keep_i]), v)
     return result / result.sum()
 
 

@@ -112,12 +112,9 @@ def _log_density(near: _Neighbour, points: NDArray, ref: tuple[float, float]) ->
     states = plane_states(near.cloud, near.index, *ref)
     origins, destinations = (states, points) if near.before else (points, states)
     za, zb, log_norm = whitened(near.components, origins, destinations)
-    out = np.empty(len(points))
     if near.before:  # sum over origins i, one value per destination j
-        log_mixture_density(za, zb, log_norm, near.log_weights, out)
-    else:  # sum over destinations (the same squared distances, roles swapped)
-        log_mixture_density(zb, za, log_norm, near.log_weights, out)
-    return out
+        return log_mixture_density(za, zb, log_norm, near.log_weights)
+    return log_mixture_density(zb, za, log_norm, near.log_weights)  # over destinations: roles swapped
 
 
 def join_window(

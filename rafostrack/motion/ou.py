@@ -24,6 +24,7 @@ says, and a float carried by a current keeps being carried while it is not heard
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -81,20 +82,29 @@ class IntegratedOU(MotionModel):
 
     def transition(self, dt_days: float) -> LinearGaussian:
         """State (east, north, v_east, v_north); the Cholesky factor per axis in closed form."""
-        t = self.decorrelation_days
-        dt = max(dt_days, 0.0)
-        a, var_x, cov_xv, var_v = (float(x) for x in ou_axis_moments(dt, self.velocity_sd_km_per_day, t))
-        vbar = np.asarray(self.mean_current_km_per_day, dtype=float)
-        i2 = np.eye(2)
-        A = np.block([[i2, t * (1.0 - a) * i2], [np.zeros((2, 2)), a * i2]])
-        b = np.concatenate([(dt - t * (1.0 - a)) * vbar, (1.0 - a) * vbar])
-        # Per axis, the Cholesky factor of [[var_v, cov], [cov, var_x]] ordered (v, x), so that
-        # the velocity noise is one standard normal and x takes the rest: exact at dt -> 0.
-        l_vv = math.sqrt(var_v)
-        l_xv = cov_xv / l_vv if l_vv > 0 else 0.0
-        l_xx = math.sqrt(max(var_x - l_xv * l_xv, 0.0))
-        L = np.zeros((4, 4))
-        for axis in range(2):
-            x, v = axis, axis + 2
-            L[x, x], L[x, v], L[v, v] = l_xx, l_xv, l_vv
-        return LinearGaussian(A=A, b=b, L=L)
+        east, north = self.mean_current_km_per_day
+        return _transition(self.velocity_sd_km_per_day, self.decorrelation_days, east, north, max(dt_days, 0.0))
+
+
+@functools.lru_cache(maxsize=256)
+def _transition(sd: float, t: float, east: float, north: float, dt: float) -> LinearGaussian:
+    """`IntegratedOU.transition`, kept for the intervals met again (a record's windows are
+    mostly a day apart: the filter, the backward filter and the smoothers ask for the same
+    few intervals thousands of times); its arrays are read-only."""
+    a, var_x, cov_xv, var_v = (float(x) for x in ou_axis_moments(dt, sd, t))
+    vbar = np.array([east, north], dtype=float)
+    i2 = np.eye(2)
+    A = np.block([[i2, t * (1.0 - a) * i2], [np.zeros((2, 2)), a * i2]])
+    b = np.concatenate([(dt - t * (1.0 - a)) * vbar, (1.0 - a) * vbar])
+    # Per axis, the Cholesky factor of [[var_v, cov], [cov, var_x]] ordered (v, x), so that
+    # the velocity noise is one standard normal and x takes the rest: exact at dt -> 0.
+    l_vv = math.sqrt(var_v)
+    l_xv = cov_xv / l_vv if l_vv > 0 else 0.0
+    l_xx = math.sqrt(max(var_x - l_xv * l_xv, 0.0))
+    L = np.zeros((4, 4))
+    for axis in range(2):
+        x, v = axis, axis + 2
+        L[x, x], L[x, v], L[v, v] = l_xx, l_xv, l_vv
+    for array in (A, b, L):
+        array.setflags(write=False)
+    return LinearGaussian(A=A, b=b, L=L)
