@@ -30,6 +30,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from .resampling import log_sum_exp
+
 MIXTURE_TOL = 1e-4
 
 
@@ -114,12 +116,6 @@ def _log(x: NDArray) -> NDArray[np.float64]:
         return np.log(x)
 
 
-def _log_mass(log_w: NDArray) -> float:
-    """log sum_i W_i."""
-    top = float(log_w.max())
-    return top + float(np.log(np.exp(log_w - top).sum())) if np.isfinite(top) else top
-
-
 def _reaches(log_norm: NDArray, log_mass: float, log_sum: NDArray) -> list[NDArray[np.bool_]]:
     """Per further kernel c >= 1, the rows (of first-kernel log sums `log_sum`) where its
     peak exp(n_c) sum_i W_i could add more than MIXTURE_TOL."""
@@ -133,7 +129,7 @@ def log_mixture_density(za: NDArray, zb: NDArray, log_norm: NDArray, log_w: NDAr
     total = np.empty(zb.shape[1])
     for block, _, top, sums in _blocks(za_t, zb, log_norm, log_w, 0, np.arange(len(total))):
         total[block] = top + _log(sums)
-    for c, reached in enumerate(_reaches(log_norm, _log_mass(log_w), total), 1):
+    for c, reached in enumerate(_reaches(log_norm, log_sum_exp(log_w), total), 1):
         rows = np.flatnonzero(reached)
         for block, _, top, sums in _blocks(za_t, zb, log_norm, log_w, c, rows):
             total[rows[block]] = np.logaddexp(total[rows[block]], top + _log(sums))
@@ -144,7 +140,7 @@ def backward_weights(za: NDArray, zb: NDArray, log_norm: NDArray, log_w: NDArray
     """(I,) S_i = W_i sum_j V_j f(x_j | x_i) / pred_j (module docstring), for za (C, I, d),
     zb (C, J, d), log_norm (C,), log_w (I,), v (J,)."""
     za_t = np.ascontiguousarray(za.transpose(0, 2, 1))
-    log_mass = _log_mass(log_w)
+    log_mass = log_sum_exp(log_w)
     out = np.zeros(za.shape[1])
     for block, terms, top, sums in _blocks(za_t, zb, log_norm, log_w, 0, np.arange(zb.shape[1])):
         for c, reached in enumerate(_reaches(log_norm, log_mass, top + _log(sums)), 1):

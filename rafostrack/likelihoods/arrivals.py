@@ -88,7 +88,6 @@ class RankedArrivals(ArrivalLikelihood):
         quality: QualityConfig | None = None,
     ):
         super().__init__(beacons, info, model)
-        self.engine = engine
         # Which kind of engine, decided once (a check against a runtime Protocol costs ~50 us).
         self._simulator = engine if isinstance(engine, SimulatingEngine) else None
         self._sum = engine if not isinstance(engine, SimulatingEngine) else None
