@@ -73,6 +73,36 @@ def test_selected_inverse_matches_dense_inverse(n, b, m):
         np.testing.assert_allclose(blocks, want, rtol=1e-8, atol=1e-12 * np.abs(full_inverse).max())
 
 
+@pytest.mark.parametrize(("n", "b", "m"), CASES)
+def test_inverse_times_rows_matches_dense_inverse(n, b, m):
+    """(N^-1 J')[c, r] at each row's entries, for random sparse rows whose band columns lie
+    within b of each other (as the rows of a J with J'J banded), with border columns, and
+    padding (column -1) that gets 0."""
+    dense = _bordered_banded(n, b, m, seed=200 + n + 7 * b + 31 * m)
+    inverse = np.linalg.inv(dense)
+    rng = np.random.default_rng(7)
+    rows, width = 40, 5
+    start = rng.integers(0, max(1, n - b), rows)
+    cols = np.where(
+        (rng.random((rows, width)) < 0.7) | (m == 0),
+        np.minimum(start[:, None] + rng.integers(0, b + 1, (rows, width)), n - 1),
+        n + rng.integers(0, max(m, 1), (rows, width)),
+    )
+    vals = rng.normal(size=(rows, width))
+    pad = rng.random((rows, width)) < 0.2
+    jac = np.zeros((rows, n + m))
+    np.add.at(jac, (np.repeat(np.arange(rows), width), cols.ravel()), np.where(pad, 0.0, vals).ravel())
+    want = np.where(pad, 0.0, (inverse @ jac.T)[cols, np.arange(rows)[:, None]])
+    cols[pad] = -1
+    got = _factor(dense, n, b).inverse_times_rows(cols, vals)
+    np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-10 * np.abs(want).max())
+    if b < n - 1:
+        far = cols.copy()
+        far[0, :2] = [0, b + 1]
+        with pytest.raises(ValueError, match="farther apart than the band"):
+            _factor(dense, n, b).inverse_times_rows(far, vals)
+
+
 def test_duplicate_sparse_entries_are_summed_and_upper_band_entries_ignored():
     """The factor reads B from the lower triangle and C from the upper-right block of the
     sparse matrix, summing duplicate (row, col) entries as scipy does."""

@@ -252,6 +252,33 @@ def test_position_covariances_match_the_dense_posterior(end_fix):
     assert np.all(np.linalg.eigvalsh(nuisance) >= 0) and np.trace(nuisance, axis1=1, axis2=2).max() > 0.01
 
 
+@pytest.mark.parametrize("end_fix", [True, False], ids=["end-fix", "no-end-fix"])
+@pytest.mark.parametrize("hyper", [HYPER, kalman.Hyper(12.0, 0.8, 3.5, 0.08)], ids=["moderate", "far"])
+def test_evidence_gradient_matches_differences_of_the_dense_evidence(end_fix, hyper):
+    """evidence_and_gradient: its value is solve_step's, and its gradient in log h is the
+    oracle's log evidence differenced centrally (step 1e-4 in log h, error ~1e-8 relative)."""
+    problem, days = _small_problem(seed=7 if end_fix else 8, end_fix=end_fix, n_nodes=11, n_heard=4)
+    rng = np.random.default_rng(9)
+    weight = rng.uniform(0.05, 1.0, len(problem.toa_s))
+    u = _linearisation_point(problem, "shifted", rng)
+    priors = kalman.KalmanPriors()
+    lin = kalman.linearise(problem, u, weight, priors)
+    log_ml, grad = kalman.evidence_and_gradient(lin, hyper)
+    assert log_ml == kalman.solve_step(lin, hyper)[1]
+    step = 1e-4
+    want = np.zeros(4)
+    for j in range(4):
+        up, down = hyper.vector(), hyper.vector()
+        up[j] += step
+        down[j] -= step
+        want[j] = (
+            _dense(problem, days, u, weight, kalman.Hyper(*np.exp(up)), priors)[0]
+            - _dense(problem, days, u, weight, kalman.Hyper(*np.exp(down)), priors)[0]
+        ) / (2 * step)
+    np.testing.assert_allclose(grad, want, rtol=1e-5, atol=1e-5)
+    assert np.abs(want).min() > 1e-3  # every component is tested, none is ~0
+
+
 def test_fit_hyper_maximises_dense_evidence_plus_hyperprior():
     """No step of 10% along any hyperparameter raises the oracle's log evidence + the weak
     log-normal hyperprior (written here) above the value at fit_hyper's answer by more than

@@ -14,7 +14,8 @@ B = U' D U (U unit upper banded), Z = B^-1 satisfies, for i <= j <= i + b,
 
     Z_ij = delta_ij / D_i - sum_{k=i+1}^{i+b} U_ik Z_kj,
 
-computed from the last row up, then [N^-1]_xx = Z + Y S^-1 Y' with Y = B^-1 C.
+computed from the last row up, then [N^-1]_xx = Z + Y S^-1 Y' with Y = B^-1 C, [N^-1]_xs =
+-Y S^-1 and [N^-1]_ss = S^-1: the entries of N^-1 that pair unknowns coupled in N.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy import sparse
 from scipy.linalg import cho_factor, cho_solve, cho_solve_banded, cholesky_banded
@@ -53,6 +55,7 @@ class BorderedBanded:
         half, info = dtbtrs(self.chol, self.border, uplo="L") if m else (self.border, 0)
         if info != 0:
             raise np.linalg.LinAlgError(f"banded triangular solve failed (LAPACK info {info})")
+        self.half = half
         # Dense products by einsum, not BLAS: the same bits whatever the thread count.
         schur = corner - np.einsum("nk,nl->kl", half, half)
         self.schur = cho_factor(schur, lower=True) if m else (np.zeros((0, 0)), True)
@@ -60,56 +63,112 @@ class BorderedBanded:
     def log_det(self) -> float:
         return float(2.0 * np.sum(np.log(self.chol[0])) + 2.0 * np.sum(np.log(np.diag(self.schur[0]))))
 
-    def _schur_solve(self, rhs: NDArray) -> NDArray[np.float64]:
+    def schur_solve(self, rhs: NDArray) -> NDArray[np.float64]:
+        """S^-1 rhs."""
         return cho_solve(self.schur, rhs) if len(rhs) else np.zeros_like(rhs)
 
     def solve(self, rhs: NDArray) -> NDArray[np.float64]:
         """N^-1 rhs (block elimination)."""
         top, bottom = rhs[: self.n], rhs[self.n :]
         b_top = cho_solve_banded((self.chol, True), top)
-        x_bottom = self._schur_solve(bottom - np.einsum("nk,n...->k...", self.border, b_top))
+        x_bottom = self.schur_solve(bottom - np.einsum("nk,n...->k...", self.border, b_top))
         x_top = cho_solve_banded((self.chol, True), top - np.einsum("nk,k...->n...", self.border, x_bottom))
         return np.concatenate([x_top, x_bottom])
 
     @functools.cached_property
     def y(self) -> NDArray[np.float64]:
-        """B^-1 C (for the diagonal blocks of N^-1)."""
-        return cho_solve_banded((self.chol, True), self.border)
+        """B^-1 C = L'^-1 H (for the diagonal blocks of N^-1)."""
+        if self.half.shape[1] == 0:
+            return self.half
+        y, info = dtbtrs(self.chol, self.half, uplo="L", trans="T")
+        if info != 0:
+            raise np.linalg.LinAlgError(f"banded triangular solve failed (LAPACK info {info})")
+        return y
 
     def band_of_inverse(self) -> NDArray[np.float64]:
         """The band of B^-1, in the lower form of `cholesky_banded` (Takahashi recursion)."""
-        n, b, chol = self.n, self.b, self.chol
-        diag = chol[0]
-        # U_ik for k = i+1..i+b: L_ki / L_ii, with L_ki = chol[k - i, i].
-        u = chol[1:] / diag[None, :]  # (b, n): u[d - 1, i] = U_{i, i+d}
-        z = np.zeros((b + 1, n))  # z[d, i] = Z_{i+d, i} = Z_{i, i+d}
-        for i in range(n - 1, -1, -1):
-            width = min(b, n - 1 - i)
-            ui = u[:width, i]
-            if width:
-                # Z_{k, j} for k, j in i+1..i+width from the band (|k - j| <= b holds).
-                block = np.empty((width, width))
-                for d in range(width):
-                    block[d, d:] = z[: width - d, i + 1 + d]
-                    block[d:, d] = z[: width - d, i + 1 + d]
-                row = -np.einsum("de,d->e", block, ui)  # Z_{i, j} for j = i+1..i+width
-                z[1 : width + 1, i] = row
-                z[0, i] = 1.0 / diag[i] ** 2 - np.einsum("d,d->", ui, row)
-            else:
-                z[0, i] = 1.0 / diag[i] ** 2
-        return z
+        return _takahashi(self.chol)
+
+    @functools.cached_property
+    def inverse_parts(self) -> tuple[NDArray, NDArray, NDArray]:
+        """N^-1 in parts: the band of [N^-1]_xx = Z + Y S^-1 Y' (lower form), the border
+        block [N^-1]_xs = -Y S^-1 and the corner [N^-1]_ss = S^-1."""
+        n, b, m = self.n, self.b, self.y.shape[1]
+        band = self.band_of_inverse()
+        if m == 0:
+            return band, np.zeros((n, 0)), np.zeros((0, 0))
+        y_s_inv = self.schur_solve(self.y.T).T
+        for d in range(b + 1):
+            band[d, : n - d] += np.einsum("nk,nk->n", self.y[d:], y_s_inv[: n - d])
+        return band, -y_s_inv, self.schur_solve(np.eye(m))
+
+    def inverse_times_rows(self, cols: NDArray[np.intp], vals: NDArray) -> NDArray[np.float64]:
+        """(N^-1 J')[cols[r, a], r] for the sparse rows r of J with entries (cols, vals), each
+        (R, e), from `inverse_parts`; a column -1 pads a row to the width e (its entry is
+        left out, and gets 0). Every pair of one row's columns must lie within the band or
+        touch the border, as in the rows of a J whose J'J is N."""
+        return _inverse_times_rows(cols, np.asarray(vals, dtype=float), *self.inverse_parts, self.n)
 
     def diagonal_blocks_of_inverse(self, starts: NDArray[np.intp], size: int) -> NDArray[np.float64]:
         """(len(starts), size, size) diagonal blocks of N^-1 at the band's unknowns
         starts[k] .. starts[k] + size - 1 (size <= bandwidth + 1)."""
-        z = self.band_of_inverse()
+        band = self.inverse_parts[0]
         out = np.empty((len(starts), size, size))
         for p in range(size):
             for q in range(size):
-                d = abs(p - q)
-                out[:, p, q] = z[d, starts + min(p, q)]
-        if self.y.shape[1] == 0:
-            return out
-        yb = self.y[starts[:, None] + np.arange(size)]  # (k, size, m)
-        s_inv_yt = self._schur_solve(yb.reshape(-1, yb.shape[-1]).T).T.reshape(yb.shape)
-        return out + np.einsum("kpm,kqm->kpq", yb, s_inv_yt)
+                out[:, p, q] = band[abs(p - q), starts + min(p, q)]
+        return out
+
+
+@njit(cache=True, nogil=True)
+def _takahashi(chol: NDArray) -> NDArray:  # pragma: no cover - compiled
+    """The band of B^-1 from B's lower banded Cholesky factor (module docstring): z[d, i] =
+    Z_{i+d, i}, from the last row up."""
+    b, n = chol.shape[0] - 1, chol.shape[1]
+    z = np.zeros((b + 1, n))
+    for i in range(n - 1, -1, -1):
+        width = min(b, n - 1 - i)
+        diag = chol[0, i]
+        # Z_{i, i+e} = -sum_d U_{i, i+d} Z_{i+d, i+e}, U_{i, i+d} = L_{i+d, i} / L_ii.
+        for e in range(1, width + 1):
+            acc = 0.0
+            for d in range(1, width + 1):
+                k, j = i + d, i + e
+                acc += chol[d, i] / diag * (z[k - j, j] if k >= j else z[j - k, k])
+            z[e, i] = -acc
+        acc = 0.0
+        for d in range(1, width + 1):
+            acc += chol[d, i] / diag * z[d, i]
+        z[0, i] = 1.0 / (diag * diag) - acc
+    return z
+
+
+@njit(cache=True, nogil=True)
+def _inverse_times_rows(cols, vals, band, border, corner, n):  # pragma: no cover - compiled
+    """`BorderedBanded.inverse_times_rows` from the band, border and corner of N^-1."""
+    rows, width = cols.shape
+    bandwidth = band.shape[0] - 1
+    out = np.zeros((rows, width))
+    for r in range(rows):
+        for a in range(width):
+            i = cols[r, a]
+            if i < 0:
+                continue
+            acc = 0.0
+            for c in range(width):
+                j, v = cols[r, c], vals[r, c]
+                if j < 0:
+                    continue
+                if i < n and j < n:
+                    d = abs(i - j)
+                    if d > bandwidth:
+                        raise ValueError("a row's columns lie farther apart than the band")
+                    acc += band[d, min(i, j)] * v
+                elif i < n:
+                    acc += border[i, j - n] * v
+                elif j < n:
+                    acc += border[j, i - n] * v
+                else:
+                    acc += corner[i - n, j - n] * v
+            out[r, a] = acc
+    return out

@@ -43,6 +43,7 @@ it to the filter's covariance.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -101,6 +102,9 @@ class Hyper:
         return cls(*np.clip(np.exp(x), cls.LOWER, cls.UPPER).tolist())
 
 
+HYPER_FIELDS = tuple(f.name for f in dataclasses.fields(Hyper))
+
+
 @dataclass(frozen=True)
 class Problem:
     """What the smoother fits: the nodes (times, nominal positions, fixes) and the arrivals."""
@@ -146,14 +150,21 @@ class Problem:
         return NODE * self.n_nodes + 3 + block * self.n_heard + np.arange(self.n_heard)
 
 
+@dataclass(frozen=True)
+class Block:
+    """Rows with the same number e of Jacobian entries: whitened residuals (m,), and each
+    row's entries as columns and values (m, e)."""
+
+    residual: NDArray[np.float64]
+    cols: NDArray[np.intp]
+    vals: NDArray[np.float64]
+
+
 @dataclass
 class Rows:
     """Whitened residual rows r(u) with their sparse Jacobian, and log|W| of the whitening."""
 
-    rows: list[NDArray] = dataclasses.field(default_factory=list)
-    cols: list[NDArray] = dataclasses.field(default_factory=list)
-    vals: list[NDArray] = dataclasses.field(default_factory=list)
-    residual: list[NDArray] = dataclasses.field(default_factory=list)
+    blocks: list[Block] = dataclasses.field(default_factory=list)
     log_whitening: float = 0.0
     n: int = 0
 
@@ -161,21 +172,40 @@ class Rows:
         """Rows with whitened residuals `residual` (m,) and Jacobian entries, each a pair
         (columns (m,), values (m,)): one nonzero per row per pair."""
         m = len(residual)
-        index = self.n + np.arange(m)
-        for col, val in entries:
-            self.rows.append(index)
-            self.cols.append(np.broadcast_to(col, (m,)))
-            self.vals.append(np.broadcast_to(val, (m,)))
-        self.residual.append(residual)
+        cols = np.stack([np.broadcast_to(col, (m,)) for col, _ in entries], axis=1).astype(np.intp)
+        vals = np.stack([np.broadcast_to(val, (m,)) for _, val in entries], axis=1).astype(float)
+        self.blocks.append(Block(np.asarray(residual, dtype=float), cols, vals))
         self.log_whitening += log_whitening
         self.n += m
 
     def system(self, n_unknowns: int) -> tuple[sparse.csr_matrix, NDArray[np.float64]]:
+        starts = np.cumsum([0] + [len(b.residual) for b in self.blocks])[:-1]
+        rows = [
+            np.repeat(start + np.arange(len(b.residual)), b.cols.shape[1])
+            for start, b in zip(starts, self.blocks, strict=True)
+        ]
         jac = sparse.csr_matrix(
-            (np.concatenate(self.vals), (np.concatenate(self.rows), np.concatenate(self.cols))),
+            (
+                np.concatenate([b.vals.ravel() for b in self.blocks]),
+                (np.concatenate(rows), np.concatenate([b.cols.ravel() for b in self.blocks])),
+            ),
             shape=(self.n, n_unknowns),
         )
-        return jac, np.concatenate(self.residual)
+        return jac, np.concatenate([b.residual for b in self.blocks])
+
+    def stacked(self) -> Block:
+        """All rows as one block, each row's entries padded to the widest row's with column
+        -1 and value 0 (`BorderedBanded.inverse_times_rows`)."""
+        width = max(b.cols.shape[1] for b in self.blocks)
+        cols = np.full((self.n, width), -1, dtype=np.intp)
+        vals = np.zeros((self.n, width))
+        start = 0
+        for b in self.blocks:
+            m, e = b.cols.shape
+            cols[start : start + m, :e] = b.cols
+            vals[start : start + m, :e] = b.vals
+            start += m
+        return Block(np.concatenate([b.residual for b in self.blocks]), cols, vals)
 
 
 def _positions(problem: Problem, u: NDArray) -> tuple[NDArray, NDArray]:
@@ -335,17 +365,26 @@ class Linearised:
 
     problem: Problem
     u: NDArray[np.float64]
-    arrivals: Normal  # at sigma = 1
+    arrival_rows: Rows  # at sigma = 1
+    arrivals: Normal  # their normal terms
     n_arrivals: int
     fixed: Normal
     n_data: int
     toa_residual_s: NDArray[np.float64]
     priors: KalmanPriors
 
-    def normal(self, hyper: Hyper) -> Normal:
-        """All rows' normal terms under `hyper`."""
+    @functools.cached_property
+    def arrival_block(self) -> Block:
+        return self.arrival_rows.stacked()
+
+    def motion_rows(self, hyper: Hyper) -> Rows:
         rows = Rows()
         _motion(self.problem, self.u, hyper, self.priors, rows)
+        return rows
+
+    def normal(self, hyper: Hyper, motion_rows: Rows | None = None) -> Normal:
+        """All rows' normal terms under `hyper` (its motion rows, when already built)."""
+        rows = self.motion_rows(hyper) if motion_rows is None else motion_rows
         motion = Normal.of(rows, self.problem.n_unknowns)
         a, f, s2 = self.arrivals, self.fixed, hyper.toa_sigma_s**2
         return Normal(
@@ -366,6 +405,7 @@ def linearise(problem: Problem, u: NDArray, weight: NDArray, priors: KalmanPrior
     return Linearised(
         problem,
         u,
+        arrivals,
         Normal.of(arrivals, n),
         len(toa_residual),
         Normal.of(fixed, n),
@@ -387,39 +427,100 @@ def solve_step(lin: Linearised, hyper: Hyper) -> tuple[NDArray[np.float64], floa
     normal = lin.normal(hyper)
     factor = _factorise(lin.problem, normal.jtj)
     step = -factor.solve(normal.jtr)
+    return step, _log_ml(lin, normal, factor, step)
+
+
+def _log_ml(lin: Linearised, normal: Normal, factor: BorderedBanded, step: NDArray) -> float:
     misfit = normal.rtr + float(np.einsum("i,i->", normal.jtr, step))
-    log_ml = -0.5 * misfit - 0.5 * factor.log_det() + normal.log_whitening - 0.5 * lin.n_data * LOG_2PI
-    return step, log_ml
+    return -0.5 * misfit - 0.5 * factor.log_det() + normal.log_whitening - 0.5 * lin.n_data * LOG_2PI
 
 
-def log_hyperprior(hyper: Hyper) -> float:
-    """log p(h): independent log-normal priors (medians `Hyper.PRIOR_MEDIAN`, log-sds
-    `Hyper.PRIOR_LOG_SD`). They only keep the search where the data do not decide: in a
+class _RowTerms:
+    """What the evidence's derivative needs of a block of rows at the solution du* of the
+    linearised model (`evidence_and_gradient`): per row its residual e* = r + J du*, and
+    per Jacobian entry (row, c) the entry (N^-1 J')[c, row]."""
+
+    def __init__(self, rows: Block, step: NDArray, factor: BorderedBanded):
+        self.step_at = np.where(rows.cols >= 0, step[rows.cols], 0.0)  # -1: padding
+        self.e_star = rows.residual + np.einsum("me,me->m", rows.vals, self.step_at)
+        self.inverse_jt = factor.inverse_times_rows(rows.cols, rows.vals)
+
+    def derivative(self, d_residual: NDArray, d_vals: NDArray) -> float:
+        """d/dh of -|r*|^2 / 2 - log|N| / 2 given the rows' derivatives dr and dJ:
+        d|r*|^2 = 2 e*'(dr + dJ du*) (du* is optimal: its own change does not count) and
+        d log|N| = tr(N^-1 dN) = 2 tr(N^-1 J' dJ)."""
+        de = d_residual + np.einsum("me,me->m", d_vals, self.step_at)
+        return -float(np.einsum("m,m->", self.e_star, de)) - float(np.einsum("me,me->", d_vals, self.inverse_jt))
+
+
+# Central differences of the motion rows in log h: the rows are closed forms of the
+# hyperparameters, cheap to rebuild; a step of 1e-5 leaves errors ~1e-10 relative.
+MOTION_STEP = 1e-5
+MOTION_HYPER = ("velocity_sd_km_per_day", "decorrelation_days", "clock_rate_sd_s_per_day")
+
+
+def evidence_and_gradient(lin: Linearised, hyper: Hyper) -> tuple[float, NDArray[np.float64]]:
+    """The marginal log-likelihood of the linearised model (`solve_step`) and its gradient in
+    log h, from one factorisation. With all rows whitened, r(h) and J(h),
+
+        d log p(y | h) = -d|r*|^2 / 2 - d log|N| / 2 + d log|W|   (`_RowTerms.derivative`).
+
+    The arrival rows scale as 1 / sigma: dr = -r and dJ = -J per unit of log sigma, and
+    d log|W| = -n_arrivals. The motion rows depend on (sigma_v, T, q) through the OU and
+    clock transitions: their derivatives by central differences (`MOTION_STEP`)."""
+    motion = lin.motion_rows(hyper)
+    normal = lin.normal(hyper, motion)
+    factor = _factorise(lin.problem, normal.jtj)
+    step = -factor.solve(normal.jtr)
+    log_ml = _log_ml(lin, normal, factor, step)
+    grad = np.zeros(4)
+    arrivals = lin.arrival_block
+    sigma = hyper.toa_sigma_s
+    scaled = Block(arrivals.residual / sigma, arrivals.cols, arrivals.vals / sigma)
+    grad[2] = _RowTerms(scaled, step, factor).derivative(-scaled.residual, -scaled.vals)
+    grad[2] -= lin.n_arrivals
+    terms = _RowTerms(motion.stacked(), step, factor)
+    scale = 0.5 / MOTION_STEP
+    for name in MOTION_HYPER:
+        value = getattr(hyper, name)
+        up = lin.motion_rows(dataclasses.replace(hyper, **{name: value * np.exp(MOTION_STEP)}))
+        down = lin.motion_rows(dataclasses.replace(hyper, **{name: value * np.exp(-MOTION_STEP)}))
+        j = HYPER_FIELDS.index(name)
+        a, b = up.stacked(), down.stacked()
+        grad[j] = terms.derivative(scale * (a.residual - b.residual), scale * (a.vals - b.vals))
+        grad[j] += scale * (up.log_whitening - down.log_whitening)
+    return log_ml, grad
+
+
+def log_hyperprior(hyper: Hyper) -> tuple[float, NDArray[np.float64]]:
+    """log p(h) and its gradient in log h: independent log-normal priors (medians
+    `Hyper.PRIOR_MEDIAN`, log-sds `Hyper.PRIOR_LOG_SD`). They only keep the search where the data do not decide: in a
     geometry where every source lies on one side, a common shift of all arrival times looks
     like a move towards the sources, and the clock's wander and the track can trade places."""
-    z = (hyper.vector() - np.log(Hyper.PRIOR_MEDIAN)) / np.array(Hyper.PRIOR_LOG_SD)
-    return float(-0.5 * np.sum(z * z))
+    log_sd = np.array(Hyper.PRIOR_LOG_SD)
+    z = (hyper.vector() - np.log(Hyper.PRIOR_MEDIAN)) / log_sd
+    return float(-0.5 * np.sum(z * z)), -z / log_sd
 
 
 def fit_hyper(lin: Linearised, hyper: Hyper) -> Hyper:
     """Hyperparameters maximising the marginal likelihood of the model linearised at `lin`,
-    times their prior (`log_hyperprior`): quasi-Newton in log space, numerical gradients,
-    within `Hyper`'s bounds."""
+    times their prior (`log_hyperprior`): quasi-Newton in log space with the gradient of
+    `evidence_and_gradient`, within `Hyper`'s bounds."""
 
-    def cost(x: NDArray) -> float:
+    def cost(x: NDArray) -> tuple[float, NDArray]:
         h = Hyper.from_vector(x)
-        return -solve_step(lin, h)[1] - log_hyperprior(h)
+        log_ml, grad = evidence_and_gradient(lin, h)
+        log_prior, prior_grad = log_hyperprior(h)
+        return -log_ml - log_prior, -grad - prior_grad
 
     bounds = list(zip(np.log(Hyper.LOWER), np.log(Hyper.UPPER), strict=True))
     start = np.clip(hyper.vector(), *np.log([Hyper.LOWER, Hyper.UPPER]))
     # The search stops when the log evidence (~10^3 nats) changes by less than ~1e-4 nats
     # (ftol) or its gradient is below 0.1 nats per unit of log hyperparameter (gtol: a 10%
     # change of any hyperparameter then gains at most ~0.01 nats); hyperparameters closer to
-    # the optimum than that make no difference. Without gtol, a search started at the
-    # optimum (the later linearisations, a warm start) spends its evaluations on line
-    # searches along a forward-difference gradient's rounding error.
-    options = {"eps": 1e-4, "ftol": 1e-7, "gtol": 0.1, "maxiter": 50}
-    best = minimize(cost, start, method="L-BFGS-B", bounds=bounds, options=options)
+    # the optimum than that make no difference.
+    options = {"ftol": 1e-7, "gtol": 0.1, "maxiter": 50}
+    best = minimize(cost, start, jac=True, method="L-BFGS-B", bounds=bounds, options=options)
     return Hyper.from_vector(best.x)
 
 
