@@ -11,7 +11,8 @@ tracking pass with robust settings gives positions and labels; from its confiden
   drift corrections, the mean current), its hyperparameters (eddy velocity sd and time
   scale, TOA noise sd, clock wander) by maximum marginal likelihood and multipath by EM
   (`noise.fit_multipath`); it also gives the position variance those nuisances leave
-  undetermined, which the tracker adds to its own;
+  undetermined, which the tracker adds to its own. A source heard on a couple of arrivals
+  that the shared sound speed hinges on is left out of it (`_hinging_sources`);
 - `noise.fit_clutter_rate`: clutter signals per window;
 - `detection.fit_detection`: each beacon's peak detection probability and half range.
 
@@ -27,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pandas as pd
 from numpy.typing import NDArray
 
 from .. import model as m
@@ -39,6 +41,10 @@ from .detection import fit_detection
 from .noise import direct_probability, fit_multipath
 
 MIN_ARRIVALS = 60  # fewer confident arrivals than this: no calibration
+# A source heard on at most this many confident arrivals is left out of the calibration
+# when leaving it out moves the shared sound speed by more than the speed's posterior sd
+# (`_hinging_sources`).
+LOW_SUPPORT_ARRIVALS = 2
 CONFIDENT_PROB = 0.9
 INITIAL_CLOCK_RATE_SD_S_PER_DAY = 0.01
 
@@ -139,6 +145,36 @@ def _problem(
     return problem, heard, mid
 
 
+def _hinging_sources(problem: kalman.Problem, fit: kalman.KalmanFit, priors: kalman.KalmanPriors) -> NDArray[np.bool_]:
+    """(H,) the heard sources the shared sound speed hinges on without support: at most
+    `LOW_SUPPORT_ARRIVALS` confident arrivals, and leaving them out moves the fitted speed
+    by more than its posterior sd. The speed is weakly identified (source offsets trade
+    against it), so one arrival of a far source, heard nowhere else in the record, can move
+    it by several m/s; such an arrival is most often clutter that fell near the source's
+    predicted time (a source heard once is, by the record's own evidence, not heard there)."""
+    shift, sd = kalman.sound_speed_influence(problem, fit, priors)
+    counts = np.bincount(problem.beacon, minlength=problem.n_heard)
+    return (counts <= LOW_SUPPORT_ARRIVALS) & (np.abs(shift) > sd)
+
+
+def _without_sources(
+    problem: kalman.Problem, mid: NDArray, drop: NDArray[np.bool_]
+) -> tuple[kalman.Problem, NDArray[np.float64]]:
+    """The problem without the arrivals of the heard sources in `drop`, and their drift references."""
+    keep = ~drop[problem.beacon]
+    index = np.cumsum(~drop) - 1
+    return dataclasses.replace(
+        problem,
+        node=problem.node[keep],
+        beacon=index[problem.beacon[keep]],
+        toa_s=problem.toa_s[keep],
+        delay_s=problem.delay_s[keep],
+        drift_days=problem.drift_days[keep],
+        beacon_lat=problem.beacon_lat[~drop],
+        beacon_lon=problem.beacon_lon[~drop],
+    ), mid[~drop]
+
+
 def _with_values(config: Config, values: dict[tuple[str, str], float], explicit: Set[tuple[str, str]]) -> Config:
     """`config` with the estimated values that the user did not set."""
     layer: dict[str, dict[str, Any]] = {}
@@ -178,19 +214,20 @@ def _detection(
 ) -> tuple[NDArray, NDArray, dict[str, Any]]:
     """Per-beacon (p_detect, half range km) fitted where there are enough opportunities (NaN
     elsewhere), from the track's positions and its labels."""
-    track = estimate.track.set_index("time")
-    heard_by = estimate.labels[estimate.labels["prob"] >= 0.5].groupby("time")["beacon_id"].agg(set)
+    track = estimate.track
+    at = pd.Index(track["time"]).get_indexer([w.time for w in record.windows])  # -1: not in the track
+    track_lat, track_lon = track["lat"].to_numpy(), track["lon"].to_numpy()
+    heard_by = estimate.labels[estimate.labels["prob"] >= 0.5].groupby("time")["beacon_id"].agg(set).to_dict()
     ranges: dict[int, list[float]] = {}
     heard: dict[int, list[float]] = {}
-    for window in record.windows:
-        if window.time not in track.index:
+    for window, row in zip(record.windows, at, strict=True):
+        if row < 0:
             continue
-        row = track.loc[window.time]
         wb = m.window_beacons(beacons, info, window.time)
-        rng = m.beacon_ranges_m(np.array([row["lat"]]), np.array([row["lon"]]), wb)
+        rng = m.beacon_ranges_m(track_lat[row : row + 1], track_lon[row : row + 1], wb)
         mu = m.predicted_toa_s(rng, wb, model)[0]
         h = m.horizon_s(window.toa_s, info.max_signals, info.window_s)
-        names = heard_by.get(window.time, set())
+        names = heard_by.get(pd.Timestamp(window.time), set())
         for k, i in enumerate(wb.index):
             if 0 < mu[k] < h - 3 * model.toa_sigma_s:
                 ranges.setdefault(int(i), []).append(float(rng[0, k]) / 1e3)
@@ -258,6 +295,15 @@ def calibrate(
         else kalman.KalmanPriors(sound_speed_m_s=1e-3, beacon_sound_speed_m_s=1e-3)
     )
     fit = kalman.fit(problem, start, weight_of, mid, priors=priors)
+    left_out: dict[str, int] = {}
+    # A sound speed the user set does not move: no source can hinge it.
+    hinging = _hinging_sources(problem, fit, priors) if speeds_fitted else np.zeros(problem.n_heard, dtype=bool)
+    if hinging.any():
+        counts = np.bincount(problem.beacon, minlength=problem.n_heard)
+        left_out = {str(beacons.beacon_id[heard[h]]): int(counts[h]) for h in np.flatnonzero(hinging)}
+        problem, mid = _without_sources(problem, mid, hinging)
+        heard = heard[~hinging]
+        fit = kalman.fit(problem, fit.hyper, weight_of, mid, priors=priors)
     hyper = fit.hyper
     values: dict[tuple[str, str], float] = {
         ("model", "sound_speed_m_s"): round(fit.sound_speed_m_s, 2),
@@ -293,6 +339,7 @@ def calibrate(
     direct = fit.weight > 0.5
     report = {
         "arrivals_used": len(problem.toa_s),
+        "sources_left_out": left_out,  # source: its confident arrivals (`_hinging_sources`)
         "windows_used": int(np.unique(problem.node).size),
         "residual_rms_s": round(float(np.sqrt(np.mean(fit.toa_residual_s[direct] ** 2))), 3),
         "clock_rate_sd_s_per_day": round(hyper.clock_rate_sd_s_per_day, 5),

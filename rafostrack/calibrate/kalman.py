@@ -31,7 +31,8 @@ those maximising the marginal likelihood of the linearised model,
     log p(y | h) = -|r*|^2 / 2 - log|J'J| / 2 + sum log|W| - (n_data / 2) log 2 pi,
 
 (r* the whitened residuals at the solution, J their Jacobian, W the rows' whitening), which
-counts the parameters that the fit spends, unlike the residuals' own spread.
+counts the parameters that the fit spends, unlike the residuals' own spread; the search
+uses its gradient (`evidence_and_gradient`).
 
 The posterior covariance also says what the nuisances leave undetermined: the position
 variance that comes from the uncertain clock and timing parameters (law of total variance,
@@ -536,6 +537,31 @@ def position_covariances(lin: Linearised, hyper: Hyper) -> tuple[NDArray[np.floa
     out = total - given
     values, vectors = np.linalg.eigh(0.5 * (out + out.transpose(0, 2, 1)))  # PSD up to round-off
     return total, np.einsum("kij,kj,klj->kil", vectors, np.clip(values, 0.0, None), vectors)
+
+
+def sound_speed_influence(problem: Problem, fit: KalmanFit, priors: KalmanPriors) -> tuple[NDArray[np.float64], float]:
+    """How much each heard source's arrivals move the shared sound speed: per source, the
+    fitted speed without them minus the fitted speed (m/s), and the speed's posterior sd
+    (m/s). At the fit's linearisation, leaving out source i's rows (J_i, r_i) gives the
+    solution du_-i = -(N - J_i'J_i)^-1 (J'r - J_i'r_i): one factorisation per source, no
+    refit. The speed is c = 1 / (s0 + ds): dc = -c^2 d(ds)."""
+    lin = linearise(problem, fit.unknowns, fit.weight, priors)
+    normal = lin.normal(fit.hyper)
+    jac, r = lin.arrival_rows.system(problem.n_unknowns)  # one row per arrival, at sigma = 1
+    s2 = fit.hyper.toa_sigma_s**2
+    factor = _factorise(problem, normal.jtj)
+    e_ds = np.zeros(problem.n_unknowns)
+    e_ds[problem.ds] = 1.0
+    speed = fit.sound_speed_m_s
+    sd = float(np.sqrt(factor.solve(e_ds)[problem.ds])) * speed**2
+    ds = fit.unknowns[problem.ds] + float(-factor.solve(normal.jtr)[problem.ds])
+    shift = np.zeros(problem.n_heard)
+    for h in range(problem.n_heard):
+        own = problem.beacon == h
+        without = _factorise(problem, (normal.jtj - (jac[own].T @ jac[own]) / s2).tocsr())
+        ds_without = fit.unknowns[problem.ds] + float(-without.solve(normal.jtr - jac[own].T @ r[own] / s2)[problem.ds])
+        shift[h] = 1.0 / (problem.slowness_s_per_m + ds_without) - 1.0 / (problem.slowness_s_per_m + ds)
+    return shift, sd
 
 
 @dataclass(frozen=True)
