@@ -354,8 +354,11 @@ class Normal:
 
     @classmethod
     def of(cls, rows: Rows, n_unknowns: int) -> Normal:
-        jac, r = rows.system(n_unknowns)
-        return cls((jac.T @ jac).tocsr(), jac.T @ r, float(r @ r), rows.log_whitening)
+        return cls.of_system(*rows.system(n_unknowns), rows.log_whitening)
+
+    @classmethod
+    def of_system(cls, jac: sparse.csr_matrix, r: NDArray, log_whitening: float) -> Normal:
+        return cls((jac.T @ jac).tocsr(), jac.T @ r, float(r @ r), log_whitening)
 
 
 @dataclass(frozen=True)
@@ -367,12 +370,21 @@ class Linearised:
     problem: Problem
     u: NDArray[np.float64]
     arrival_rows: Rows  # at sigma = 1
-    arrivals: Normal  # their normal terms
     n_arrivals: int
     fixed: Normal
     n_data: int
     toa_residual_s: NDArray[np.float64]
     priors: KalmanPriors
+
+    @functools.cached_property
+    def arrival_system(self) -> tuple[sparse.csr_matrix, NDArray[np.float64]]:
+        """The arrival rows' Jacobian and residuals (one row per arrival, at sigma = 1)."""
+        return self.arrival_rows.system(self.problem.n_unknowns)
+
+    @functools.cached_property
+    def arrivals(self) -> Normal:
+        """The arrival rows' normal terms (at sigma = 1)."""
+        return Normal.of_system(*self.arrival_system, self.arrival_rows.log_whitening)
 
     @functools.cached_property
     def arrival_block(self) -> Block:
@@ -402,14 +414,12 @@ def linearise(problem: Problem, u: NDArray, weight: NDArray, priors: KalmanPrior
     fixed = Rows()
     n_end = _end_fix(problem, u, priors, fixed)
     _statics(problem, u, priors, fixed)
-    n = problem.n_unknowns
     return Linearised(
         problem,
         u,
         arrivals,
-        Normal.of(arrivals, n),
         len(toa_residual),
-        Normal.of(fixed, n),
+        Normal.of(fixed, problem.n_unknowns),
         len(toa_residual) + n_end,
         toa_residual,
         priors,
@@ -425,10 +435,15 @@ def _factorise(problem: Problem, normal: sparse.spmatrix) -> BorderedBanded:
 def solve_step(lin: Linearised, hyper: Hyper) -> tuple[NDArray[np.float64], float]:
     """The Gauss-Newton step du = -N^-1 J'r (N = J'J) and the marginal log-likelihood of the
     linearised model at its solution, with |r*|^2 = r'r + (J'r)' du (module docstring)."""
-    normal = lin.normal(hyper)
-    factor = _factorise(lin.problem, normal.jtj)
-    step = -factor.solve(normal.jtr)
+    normal, factor, step = _solved(lin, hyper)
     return step, _log_ml(lin, normal, factor, step)
+
+
+def _solved(lin: Linearised, hyper: Hyper, motion_rows: Rows | None = None) -> tuple[Normal, BorderedBanded, NDArray]:
+    """The normal terms under `hyper`, N's factorisation and the step -N^-1 J'r."""
+    normal = lin.normal(hyper, motion_rows)
+    factor = _factorise(lin.problem, normal.jtj)
+    return normal, factor, -factor.solve(normal.jtr)
 
 
 def _log_ml(lin: Linearised, normal: Normal, factor: BorderedBanded, step: NDArray) -> float:
@@ -470,9 +485,7 @@ def evidence_and_gradient(lin: Linearised, hyper: Hyper) -> tuple[float, NDArray
     d log|W| = -n_arrivals. The motion rows depend on (sigma_v, T, q) through the OU and
     clock transitions: their derivatives by central differences (`MOTION_STEP`)."""
     motion = lin.motion_rows(hyper)
-    normal = lin.normal(hyper, motion)
-    factor = _factorise(lin.problem, normal.jtj)
-    step = -factor.solve(normal.jtr)
+    normal, factor, step = _solved(lin, hyper, motion)
     log_ml = _log_ml(lin, normal, factor, step)
     grad = np.zeros(4)
     arrivals = lin.arrival_block
@@ -495,9 +508,10 @@ def evidence_and_gradient(lin: Linearised, hyper: Hyper) -> tuple[float, NDArray
 
 def log_hyperprior(hyper: Hyper) -> tuple[float, NDArray[np.float64]]:
     """log p(h) and its gradient in log h: independent log-normal priors (medians
-    `Hyper.PRIOR_MEDIAN`, log-sds `Hyper.PRIOR_LOG_SD`). They only keep the search where the data do not decide: in a
-    geometry where every source lies on one side, a common shift of all arrival times looks
-    like a move towards the sources, and the clock's wander and the track can trade places."""
+    `Hyper.PRIOR_MEDIAN`, log-sds `Hyper.PRIOR_LOG_SD`). They only keep the search where the
+    data do not decide: in a geometry where every source lies on one side, a common shift of
+    all arrival times looks like a move towards the sources, and the clock's wander and the
+    track can trade places."""
     log_sd = np.array(Hyper.PRIOR_LOG_SD)
     z = (hyper.vector() - np.log(Hyper.PRIOR_MEDIAN)) / log_sd
     return float(-0.5 * np.sum(z * z)), -z / log_sd
@@ -546,15 +560,14 @@ def sound_speed_influence(problem: Problem, fit: KalmanFit, priors: KalmanPriors
     solution du_-i = -(N - J_i'J_i)^-1 (J'r - J_i'r_i): one factorisation per source, no
     refit. The speed is c = 1 / (s0 + ds): dc = -c^2 d(ds)."""
     lin = linearise(problem, fit.unknowns, fit.weight, priors)
-    normal = lin.normal(fit.hyper)
-    jac, r = lin.arrival_rows.system(problem.n_unknowns)  # one row per arrival, at sigma = 1
+    normal, factor, step = _solved(lin, fit.hyper)
+    jac, r = lin.arrival_system
     s2 = fit.hyper.toa_sigma_s**2
-    factor = _factorise(problem, normal.jtj)
     e_ds = np.zeros(problem.n_unknowns)
     e_ds[problem.ds] = 1.0
     speed = fit.sound_speed_m_s
     sd = float(np.sqrt(factor.solve(e_ds)[problem.ds])) * speed**2
-    ds = fit.unknowns[problem.ds] + float(-factor.solve(normal.jtr)[problem.ds])
+    ds = fit.unknowns[problem.ds] + float(step[problem.ds])
     shift = np.zeros(problem.n_heard)
     for h in range(problem.n_heard):
         own = problem.beacon == h
