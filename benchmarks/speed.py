@@ -8,7 +8,7 @@ of the last pass; `--profile` prints the top functions by cumulative time (cProf
 finding what to optimise. Run on one core (`OMP_NUM_THREADS=1 taskset -c 0`) for figures
 that do not depend on what else runs.
 
-    python benchmarks/speed.py [--methods exact bp] [--particles 1000 10000] [--profile]
+    python benchmarks/speed.py [--methods exact bp] [--particles 1000 10000] [--config FILE] [--profile]
 """
 
 from __future__ import annotations
@@ -35,10 +35,11 @@ def main() -> None:
     parser.add_argument("--float-file", type=Path, default=SAMPLE)
     parser.add_argument("--methods", nargs="+", default=["exact", "bp", "unranked", "labeled"])
     parser.add_argument("--particles", type=int, nargs="+", default=[1000, 10000])
+    parser.add_argument("--config", type=Path, action="append", default=[], help="an extra config layer")
     parser.add_argument("--profile", action="store_true")
     args = parser.parse_args()
 
-    loaded = load_float(TrackInputs(args.float_file))
+    loaded = load_float(TrackInputs(args.float_file, config_files=tuple(args.config)))
     n_windows = len(loaded.record.windows)
     n_toas = sum(w.n_signals for w in loaded.record.windows)
     print(f"{args.float_file.name}: {n_windows} windows, {n_toas} TOAs, {len(loaded.beacons)} beacons")

@@ -148,6 +148,7 @@ class FilterConfig:
     engine: str = setting(choices=_registry("rafostrack.engines", "ENGINES"))
     resampling: str = setting(choices=_registry("rafostrack.resampling", "RESAMPLERS"))
     resample_ess_fraction: float = setting("in [0, 1]", _fraction)
+    guided_fraction: float = setting("in [0, 1)", lambda v: 0 <= v < 1)
     mode_link_km: float = setting("> 0", _positive)
     max_modes: int = setting(">= 1", lambda v: v >= 1)
     min_mode_mass: float = setting("in [0, 1)", lambda v: 0 <= v < 1)

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from .clusters import mode_labels
 from .domain import Cloud, Particles, PositionFix, Window, days_between
+from .guided import Guide
 from .likelihoods import ArrivalLikelihood, Evidence, Likelihood, MoveFactor
 from .motion import MotionModel
 from .recovery import RecoveryMonitor, RecoverySettings
@@ -108,11 +109,12 @@ class FilterSettings:
 
 
 class Proposal(Protocol):
-    """A data-driven proposal for new particle states (e.g. `recovery.Reseeding`)."""
+    """A data-driven proposal q(x' | x) for new particle states, one per ancestor x
+    (`recovery.Reseeding`, which ignores the ancestor; `guided.GuidedDrift`)."""
 
-    def sample(self, n: int, rng: np.random.Generator) -> Particles: ...
+    def sample(self, ancestors: Particles, rng: np.random.Generator) -> Particles: ...
 
-    def log_density(self, particles: Particles) -> NDArray[np.float64]: ...
+    def log_density(self, ancestors: Particles, particles: Particles) -> NDArray[np.float64]: ...
 
 
 class ParticleFilter:
@@ -129,8 +131,10 @@ class ParticleFilter:
         label_probs: bool = True,
         recovery: RecoverySettings | None = None,
         factors: Sequence[MoveFactor] = (),
+        guide: Guide | None = None,
     ):
-        """`factors` weigh each particle's move (e.g. context constraints).
+        """`factors` weigh each particle's move (e.g. context constraints). `guide` draws
+        part of the cloud from a proposal guided by each window (`rafostrack.guided`).
         `label_probs=False` skips the filtered association marginals (when only smoothed
         labels are wanted, which are recomputed after smoothing)."""
         self.motion = motion
@@ -140,6 +144,7 @@ class ParticleFilter:
         self.label_probs = label_probs
         self.recovery = recovery
         self.factors = tuple(factors)
+        self.guide = guide
 
     def run(
         self,
@@ -175,6 +180,10 @@ class ParticleFilter:
                 if reseed is not None:
                     proposals.append((monitor.settings.fraction, reseed))
                     reseed_source = len(proposals)
+            if self.guide is not None and isinstance(obs, Window):
+                guided = self.guide.proposal(self.motion, dt_days, moved, prior_weights, evidence.loglik)
+                if guided is not None:  # a share of the particles the recovery search left to the drift
+                    proposals.append((self.guide.fraction * (1.0 - sum(a for a, _ in proposals)), guided))
             source = np.zeros(n, dtype=np.intp)
             correction = np.zeros(n)
             if proposals:
@@ -229,9 +238,9 @@ class ParticleFilter:
         rng: np.random.Generator,
     ) -> tuple[Particles, Evidence, NDArray[np.intp], NDArray[np.float64]]:
         """Draw each particle's new state from the motion model (already in `moved`) or, with
-        probability alpha_k, from proposal k; return the states, their evidence, which
-        proposal each came from (0 = motion) and the log weight correction
-        log f(x' | x) - log [alpha_0 f(x' | x) + sum_k alpha_k q_k(x')]
+        probability alpha_k, from proposal k given its ancestor; return the states, their
+        evidence, which proposal each came from (0 = motion) and the log weight correction
+        log f(x' | x) - log [alpha_0 f(x' | x) + sum_k alpha_k q_k(x' | x)]
         (multiple importance sampling, balance heuristic: every draw is weighted by the
         mixture it may have come from)."""
         n = len(moved)
@@ -240,12 +249,12 @@ class ParticleFilter:
         for k, (_, proposal) in enumerate(proposals, start=1):
             slots = np.flatnonzero(source == k)
             if len(slots):
-                moved = moved.replace_at(slots, proposal.sample(len(slots), rng))
+                moved = moved.replace_at(slots, proposal.sample(before.take(slots), rng))
         redrawn = np.flatnonzero(source > 0)
         if len(redrawn):
             evidence = _merge_evidence(evidence, redrawn, self._evaluate(moved.take(redrawn), obs))
         log_f = self.motion.log_transition(before, moved, dt_days)
-        terms = [np.log(alphas[0]) + log_f] + [np.log(a) + q.log_density(moved) for a, q in proposals]
+        terms = [np.log(alphas[0]) + log_f] + [np.log(a) + q.log_density(before, moved) for a, q in proposals]
         return moved, evidence, source, log_f - np.logaddexp.reduce(np.array(terms), axis=0)
 
 

@@ -116,7 +116,9 @@ class Reseeding:
         log_pi = c.loglik[keep] - log_sum_exp(c.loglik[keep])
         return c.lat[keep], c.lon[keep], log_pi
 
-    def sample(self, n: int, rng: np.random.Generator) -> Particles:
+    def sample(self, ancestors: Particles, rng: np.random.Generator) -> Particles:
+        """One draw per ancestor, whatever the ancestor."""
+        n = len(ancestors)
         lat_c, lon_c, log_pi = self._mixture()
         pick = rng.choice(len(log_pi), size=n, p=np.exp(log_pi))
         east, north = rng.normal(0.0, self.sd_km, size=(2, n))
@@ -127,8 +129,9 @@ class Reseeding:
             velocity = np.ascontiguousarray((mean[:, None] + sd * rng.standard_normal((2, n))).T)
         return Particles(lat, lon, velocity)
 
-    def log_density(self, particles: Particles) -> NDArray[np.float64]:
-        """log q(x, v) of each particle (position mixture times the velocity law)."""
+    def log_density(self, ancestors: Particles, particles: Particles) -> NDArray[np.float64]:
+        """log q(x, v) of each particle (position mixture times the velocity law), whatever
+        its ancestor."""
         lat_c, lon_c, log_pi = self._mixture()
         s2 = self.sd_km**2
         terms = []

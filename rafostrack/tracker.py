@@ -22,6 +22,7 @@ from .config import AmbiguityConfig, Config
 from .domain import ArrivalRecord, BeaconTable, FloatInfo, Particles, PositionFix
 from .estimates import Estimate, EstimateBuilder, Regions, build_estimate
 from .filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
+from .guided import Guide
 from .likelihoods import (
     ArrivalLikelihood,
     MoveFactor,
@@ -98,6 +99,7 @@ class Tracker:
     seed: int
     recovery: RecoverySettings | None = None
     factors: tuple[MoveFactor, ...] = ()
+    guide: Guide | None = None  # part of each window's cloud drawn guided by it (`rafostrack.guided`)
     two_filter: bool = False  # smooth by joining a backward filter (`rafostrack.two_filter`)
     ffbsm_columns: int = MAX_COLUMNS  # FFBSm: quantile points of each step's cloud (`smoother.smooth`)
 
@@ -125,6 +127,7 @@ class Tracker:
             seed=config.filter.seed,
             recovery=_recovery(config),
             factors=move_factors_from_config(config, beacons, info),
+            guide=Guide(config.filter.guided_fraction) if config.filter.guided_fraction > 0 else None,
         )
 
     def _regions(self) -> Regions | None:
@@ -172,6 +175,7 @@ class Tracker:
             label_probs=label_probs,
             recovery=self.recovery,
             factors=self.factors,
+            guide=self.guide,
         )
         return pf.run(start, events, float_rng(self.seed, stream), keep=keep, on_step=on_step)
 
