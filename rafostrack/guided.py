@@ -41,6 +41,7 @@ on the benchmarks (more ESS, the same accuracy, more time; off by default): READ
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,15 +49,14 @@ from numpy.typing import NDArray
 from scipy.linalg import solve_triangular
 
 from .domain import Particles
-from .geodesy import displace, local_offsets_km
-from .motion import MotionModel
+from .geodesy import local_offsets_km
+from .motion import LinearGaussian, MotionModel
+from .motion.base import from_plane_states
 from .resampling import ess, normalise_log_weights
 
 # A quadratic has 6 coefficients in 2-d; fitted on fewer effective particles than this,
 # the summary is noise, and the window is left to the drift model.
 MIN_PILOT_ESS = 30.0
-
-_MAX_LAT = 89.999  # as `motion.base`: positions are kept off the poles
 
 
 @dataclass(frozen=True)
@@ -108,39 +108,43 @@ class GuidedDrift:
     dt_days: float
     summary: LikelihoodSummary
 
-    def _moments(self, ancestors: Particles) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The means m'_i (P, d) in each ancestor's plane and the shared Cholesky factor of C."""
-        tr = self.motion.transition(self.dt_days)
-        d = tr.dim
-        state = np.zeros((len(ancestors), d))
-        if self.motion.has_velocity:
-            state[:, 2:] = ancestors.velocity_km_per_day
-        mean = state @ tr.A.T + tr.b
-        q = tr.Q
-        lam, eta = self.summary.precision, self.summary.shift
+    @functools.cached_property
+    def _transition(self) -> LinearGaussian:
+        return self.motion.transition(self.dt_days)
+
+    @functools.cached_property
+    def _covariance(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """What every particle shares: the gain C H' and the Cholesky factor of C."""
+        q, lam = self._transition.Q, self.summary.precision
         values, vectors = np.linalg.eigh(lam)
         root = (vectors * np.sqrt(np.maximum(values, 0.0))) @ vectors.T
         rhq = root @ q[:2, :]
         inner = np.eye(2) + rhq[:, :2] @ root
         cov = q - rhq.T @ np.linalg.solve(inner, rhq)
         cov = 0.5 * (cov + cov.T)
+        return cov[:, :2], np.linalg.cholesky(cov)
+
+    def _means(self, ancestors: Particles) -> NDArray[np.float64]:
+        """The means m'_i (P, d), each in its ancestor's plane."""
+        tr = self._transition
+        state = np.zeros((len(ancestors), tr.dim))
+        if self.motion.has_velocity:
+            state[:, 2:] = ancestors.velocity_km_per_day
+        mean = state @ tr.A.T + tr.b
         east, north = local_offsets_km(ancestors.lat, ancestors.lon, self.summary.lat0, self.summary.lon0)
-        origin = np.column_stack([east, north])
-        innovation = eta - (origin + mean[:, :2]) @ lam
-        mean = mean + innovation @ cov[:, :2].T
-        return mean, np.linalg.cholesky(cov)
+        lam = self.summary.precision
+        innovation = self.summary.shift - (np.column_stack([east, north]) + mean[:, :2]) @ lam
+        return mean + innovation @ self._covariance[0].T
 
     def sample(self, ancestors: Particles, rng: np.random.Generator) -> Particles:
         """One draw x' ~ q_i for each ancestor x_i."""
-        mean, factor = self._moments(ancestors)
+        mean, factor = self._means(ancestors), self._covariance[1]
         state = mean + rng.standard_normal(mean.shape) @ factor.T
-        lat, lon = displace(ancestors.lat, ancestors.lon, state[:, 0], state[:, 1])
-        velocity = np.ascontiguousarray(state[:, 2:]) if self.motion.has_velocity else None
-        return Particles(np.clip(lat, -_MAX_LAT, _MAX_LAT), lon, velocity)
+        return from_plane_states(ancestors, state, self.motion.has_velocity)
 
     def log_density(self, ancestors: Particles, particles: Particles) -> NDArray[np.float64]:
         """log q_i(x'_i) of each particle given its ancestor."""
-        mean, factor = self._moments(ancestors)
+        mean, factor = self._means(ancestors), self._covariance[1]
         _, state = self.motion.plane_states(ancestors, particles)
         z = solve_triangular(factor, (state - mean).T, lower=True)
         d = mean.shape[1]
@@ -162,7 +166,7 @@ class Guide:
         """The proposal for a window `dt_days` after the last step, from the pilot `moved`
         (the cloud moved by `motion`, its `prior_weights`, the window's `loglik`); None when
         there is no interval to guide over or no summary (`summarise_likelihood`)."""
-        if dt_days <= 0.0 or self.fraction <= 0.0:
+        if dt_days <= 0.0:
             return None
         summary = summarise_likelihood(moved, prior_weights, loglik, self.min_pilot_ess)
         return None if summary is None else GuidedDrift(motion, dt_days, summary)

@@ -64,6 +64,15 @@ class LinearGaussian:
         return np.linalg.inv(np.linalg.cholesky(q))
 
 
+def from_plane_states(origins: Particles, states: NDArray[np.float64], has_velocity: bool) -> Particles:
+    """The particles at tangent-plane `states` (P, d) of `origins`, particle by particle (east
+    and north km from each origin, then the velocity if any): the inverse of
+    `MotionModel.plane_states`, positions kept off the poles."""
+    lat, lon = displace(origins.lat, origins.lon, states[:, 0], states[:, 1])
+    velocity = np.ascontiguousarray(states[:, 2:]) if has_velocity else None
+    return Particles(np.clip(lat, -_MAX_LAT, _MAX_LAT), lon, velocity)
+
+
 class MotionModel(ABC):
     """A drift model: sampling, exact transitions over any interval, and its state layout."""
 
@@ -156,9 +165,7 @@ class MotionModel(ABC):
             state[2:] = particles.velocity_km_per_day.T
         # No BLAS: einsum's own loops give the same bits whatever the thread count.
         moved = np.einsum("ij,jp->ip", tr.A, state) + tr.b[:, None] + np.einsum("ij,jp->ip", tr.L, noise)
-        lat, lon = displace(particles.lat, particles.lon, moved[0], moved[1])
-        velocity = np.ascontiguousarray(moved[2:].T) if self.has_velocity else None
-        return Particles(np.clip(lat, -_MAX_LAT, _MAX_LAT), lon, velocity)
+        return from_plane_states(particles, moved.T, self.has_velocity)
 
     def propagate(self, particles: Particles, dt_days: float, rng: np.random.Generator) -> Particles:
         """Sample x' ~ f(. | x, dt) for every particle (exact over any `dt_days`)."""
@@ -250,6 +257,4 @@ class _Kernel:
             state[2:] = particles.velocity_km_per_day.T
         moved = np.einsum("ij,jp->ip", tr.A, state) + tr.b[:, None]
         moved += np.einsum("ij,jp->ip", tr.L, rng.standard_normal((tr.dim, n)))
-        lat, lon = displace(particles.lat, particles.lon, moved[0], moved[1])
-        velocity = np.ascontiguousarray(moved[2:].T) if self.has_velocity else None
-        return Particles(np.clip(lat, -_MAX_LAT, _MAX_LAT), lon, velocity)
+        return from_plane_states(particles, moved.T, self.has_velocity)
