@@ -18,7 +18,9 @@ ratio, the run time; then the issue's targets, PASS or FAIL, with the floats fai
 
 A single run's per-float figures move with the filter's random path (README, Robustness):
 `--filter-seeds` tracks every float once per `[filter] seed` given, prints the table per
-seed, and then, per target, the floats that fail it with every seed.
+seed, then, per target, the floats that fail it with every seed, and per float how far
+the tracks of different seeds lie apart (`seed_spread`: the Monte Carlo error of the
+whole method, which the reported sd_km does not include).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ import pandas as pd
 from rafostrack.config import with_overrides
 from rafostrack.domain import Particles
 from rafostrack.evaluate import inside_ellipse, position_errors_km
+from rafostrack.geodesy import local_offsets_km
 from rafostrack.likelihoods import arrivals_from_config
 from rafostrack.pipeline import LoadedFloat, TrackInputs, load_float, track_float
 from rafostrack.posterior import ELLIPSE_95_SCALE
@@ -172,6 +175,21 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> dict[str, An
     return row
 
 
+def seed_spread(out_root: Path, seeds: list[int], floats: list[str]) -> pd.DataFrame:
+    """Per float, how far the default tracks of the filter `seeds` lie apart: the RMS
+    distance (km) of each seed's positions from their mean over the seeds, sqrt(n / (n - 1))
+    x the sample's (so that it estimates one run's Monte Carlo error), beside the median
+    sd_km that the first seed's track reports."""
+    rows = {}
+    for name in floats:
+        tracks = [pd.read_parquet(out_root / f"seed{seed}" / "default" / name / "track.parquet") for seed in seeds]
+        lat, lon = np.mean([t["lat"] for t in tracks], axis=0), np.mean([t["lon"] for t in tracks], axis=0)
+        offsets = [local_offsets_km(t["lat"].to_numpy(), t["lon"].to_numpy(), lat, lon) for t in tracks]
+        spread = float(np.sqrt(np.mean(np.square(offsets).sum(axis=1)) * len(seeds) / (len(seeds) - 1)))
+        rows[name] = {"spread_km": spread, "median_sd_km": float(np.median(tracks[0]["sd_km"]))}
+    return pd.DataFrame.from_dict(rows, orient="index")
+
+
 def targets(table: pd.DataFrame) -> list[tuple[str, list[str]]]:
     """The issue's targets and the floats failing each."""
     low_clutter = table["clutter"] <= 2
@@ -244,6 +262,14 @@ def main() -> None:
         for k, (name, _) in enumerate(failing_with[0]):
             always = sorted(set.intersection(*(set(per_seed[k][1]) for per_seed in failing_with)))
             print(f"  {name}: {len(always)}" + (f" ({', '.join(always)})" if always else ""))
+        spread = seed_spread(root / "out", [int(k) for k in args.filter_seeds], [f.stem for f in files])
+        ratio = spread["spread_km"] / spread["median_sd_km"]
+        print("\nseed spread (RMS distance of each seed's track from their mean, km) and the median sd_km:")
+        print(spread.T.to_string(float_format=lambda x: f"{x:.2f}"))
+        print(
+            f"median spread {spread['spread_km'].median():.2f} km, {ratio.median():.0%} of the median sd_km "
+            f"(largest: {ratio.idxmax()}, {ratio.max():.0%})"
+        )
     print(f"\n{len(table)} runs in {time.perf_counter() - started:.0f} s ({args.workers} workers); outputs in {root}")
     if args.csv:
         table.to_csv(args.csv, index=False)
