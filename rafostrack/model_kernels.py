@@ -39,6 +39,7 @@ FAR_EARLY = 9.0  # sds before the prediction: Gaussian e^-40, the delayed copy l
 FAR_LATE = 40.0  # mean delays after it: the delayed copy e^-40
 FAR_LATE_DIRECT = 9.0  # sds after it without multipath
 _SQRT_HALF = math.sqrt(0.5)
+_EXP_UNDERFLOW = 746.0  # math.exp(-x) == 0.0 for x above ~745.13
 
 
 @njit(cache=True, nogil=True)
@@ -79,7 +80,10 @@ def logpdf_c(r: float, c) -> float:  # pragma: no cover - compiled
     u = z - shift
     b = log_delayed - r * inv_tau + (log_ndtr(u) if u < 8.0 else 0.0)
     top = max(a, b)
-    return top + math.log1p(math.exp(-abs(a - b)))
+    gap = abs(a - b)
+    if gap > _EXP_UNDERFLOW:  # exp(-gap) is 0.0: the sum below is `top`, bit for bit
+        return top
+    return top + math.log1p(math.exp(-gap))
 
 
 @njit(cache=True, nogil=True)
