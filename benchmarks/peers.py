@@ -201,7 +201,8 @@ def load_problem(float_file: Path, n_particles: int, n_windows: int | None) -> P
         fixes={"use_end_fix": False},
         motion={"model": "random_walk", "mean_current_east_km_per_day": 0.0, "mean_current_north_km_per_day": 0.0},
         model={"multipath_fraction": 0.0},
-        filter={"likelihood": "labeled", "particles": n_particles},
+        # The peers' rule (rafostrack's default resamples at every window).
+        filter={"likelihood": "labeled", "particles": n_particles, "resample_ess_fraction": 0.5},
     )
     record = loaded.record
     record = dataclasses.replace(record, windows=record.windows[: n_windows or len(record.windows)])

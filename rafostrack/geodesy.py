@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import vectorize
+from numba import njit, vectorize
 from numpy.typing import ArrayLike, NDArray
 
 WGS84_A_M = 6378137.0
@@ -39,8 +39,30 @@ def range_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) 
     return _pair_range_m(*b1, *half_b1, *half_l1, *b2, *half_b2, *half_l2)
 
 
-@vectorize([f"float64({', '.join(['float64'] * 12)})"], cache=True)
-def _pair_range_m(sb1, cb1, shb1, chb1, shl1, chl1, sb2, cb2, shb2, chb2, shl2, chl2):  # pragma: no cover
+def range_matrix_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: ArrayLike) -> NDArray:
+    """Ranges (m) from each of n points (lat1, lon1) to each of m points (lat2, lon2), (n, m):
+    `range_m` of the outer pairs, the same numbers, in one compiled loop over the pairs (e.g.
+    particles x beacons) rather than a broadcast of twelve operands."""
+    first = np.array([t for pair in _point_terms(np.ravel(lat1), np.ravel(lon1)) for t in pair])
+    second = np.array([t for pair in _point_terms(np.ravel(lat2), np.ravel(lon2)) for t in pair])
+    out = np.empty((first.shape[1], second.shape[1]))
+    _range_matrix_m(first, second, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _range_matrix_m(first, second, out):  # pragma: no cover - compiled
+    """out[p, i] = `_andoyer_m` of point terms (6, n) column p and (6, m) column i."""
+    for p in range(first.shape[1]):
+        for i in range(second.shape[1]):
+            out[p, i] = _andoyer_m(
+                first[0, p], first[1, p], first[2, p], first[3, p], first[4, p], first[5, p],
+                second[0, i], second[1, i], second[2, i], second[3, i], second[4, i], second[5, i],
+            )  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def _andoyer_m(sb1, cb1, shb1, chb1, shl1, chl1, sb2, cb2, shb2, chb2, shl2, chl2):  # pragma: no cover
     """Andoyer-Lambert (`range_m`) from each point's (sin b, cos b), (sin b/2, cos b/2),
     (sin lambda/2, cos lambda/2). With P = (b1 + b2)/2, Q = (b2 - b1)/2: sin P cos Q =
     (sin b1 + sin b2)/2, cos P sin Q = (sin b2 - sin b1)/2, sin^2(sigma/2) = h, cos^2(sigma/2)
@@ -50,7 +72,7 @@ def _pair_range_m(sb1, cb1, shb1, chb1, shl1, chl1, sb2, cb2, shb2, chb2, shl2, 
     sin_half_db = shb2 * chb1 - chb2 * shb1
     sin_half_dl = shl2 * chl1 - chl2 * shl1
     h = sin_half_db * sin_half_db + cb1 * cb2 * sin_half_dl * sin_half_dl
-    # The loop over pairs is vectorised, so every branch is evaluated for every pair: no
+    # The loop over pairs may be vectorised, so every branch is evaluated for every pair: no
     # expression may divide by zero or order-compare a NaN (either raises the invalid flag,
     # a RuntimeWarning). Edge cases are computed with h = 1/2 and chosen at the end.
     missing = math.isnan(h)  # a missing position
@@ -67,6 +89,12 @@ def _pair_range_m(sb1, cb1, shb1, chb1, shl1, chl1, sb2, cb2, shb2, chb2, shl2, 
     if coincident:
         return 0.0
     return WGS84_A_M * (sigma - WGS84_F / 2.0 * (x + y))
+
+
+@vectorize([f"float64({', '.join(['float64'] * 12)})"], cache=True)
+def _pair_range_m(sb1, cb1, shb1, chb1, shl1, chl1, sb2, cb2, shb2, chb2, shl2, chl2):  # pragma: no cover
+    """`_andoyer_m` as a numpy ufunc (broadcasting its operands)."""
+    return _andoyer_m(sb1, cb1, shb1, chb1, shl1, chl1, sb2, cb2, shb2, chb2, shl2, chl2)
 
 
 def _point_terms(lat_deg: ArrayLike, lon_deg: ArrayLike) -> tuple[tuple[NDArray, NDArray], ...]:

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from .config import ModelConfig
 from .domain import BeaconTable, FloatInfo, elapsed_days
-from .geodesy import range_m
+from .geodesy import range_matrix_m
 from .model_kernels import factors_kernel, toa_cdf_ufunc, toa_logpdf_ufunc
 
 
@@ -90,8 +90,8 @@ def _per_beacon(values: NDArray | None, default: float) -> NDArray | float:
 
 
 def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np.float64]:
-    """Ranges (P, s) from particle positions to the window's beacons."""
-    return range_m(lat[:, None], lon[:, None], wb.lat[None, :], wb.lon[None, :])
+    """Ranges (P, s) from particle positions (P,) to the window's beacons."""
+    return range_matrix_m(lat, lon, wb.lat, wb.lon)
 
 
 def predicted_toa_s(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:

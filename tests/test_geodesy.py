@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from geographiclib.geodesic import Geodesic
 
-from rafostrack.geodesy import displace, local_offsets_km, range_m, wrap_lon
+from rafostrack.geodesy import displace, local_offsets_km, range_m, range_matrix_m, wrap_lon
 
 
 def test_ranges_match_geographiclib_within_10m_up_to_3000km():
@@ -49,6 +49,24 @@ def test_range_broadcasts_particles_against_beacons():
     lon = np.array([-100.0, -99.0, -98.0])[:, None]
     out = range_m(lat, lon, np.array([-60.0, -55.0]), np.array([-90.0, -95.0]))
     assert out.shape == (3, 2)
+
+
+def test_range_matrix_is_range_m_of_the_outer_pairs_bit_for_bit():
+    """Particles x beacons in one compiled loop: the numbers of the broadcast `range_m`,
+    edge cases included (a missing particle, a particle on a beacon, an antipode)."""
+    rng = np.random.default_rng(3)
+    lat, lon = rng.uniform(-70.0, -50.0, 257), rng.uniform(-70.0, 20.0, 257)
+    beacon_lat, beacon_lon = rng.uniform(-70.0, -50.0, 7), rng.uniform(-70.0, 20.0, 7)
+    lat[5] = np.nan
+    beacon_lat[2], beacon_lon[2] = lat[9], lon[9]
+    beacon_lat[4], beacon_lon[4] = -lat[11], lon[11] + 180.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = range_matrix_m(lat, lon, beacon_lat, beacon_lon)
+    expected = range_m(lat[:, None], lon[:, None], beacon_lat[None, :], beacon_lon[None, :])
+    assert out.shape == (257, 7)
+    np.testing.assert_array_equal(out, expected)
+    assert out[9, 2] == 0.0 and np.isnan(out[11, 4]) and np.isnan(out[5]).all()
 
 
 def test_displace_and_offsets_round_trip():
