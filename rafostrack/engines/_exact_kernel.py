@@ -35,14 +35,18 @@ def _weights(log_match, log_unheard, p0, nl, pair_j, pair_e, w, pw, active, acti
     others are skipped)."""
     shared = pair_e.shape[0] == 1
     s, k = log_match.shape[1], log_match.shape[2]
+    active[:, :] = False
+    for lane in range(nl):  # particle by particle: its factors lie together in memory
+        for i in range(s):
+            log_u = log_unheard[p0 + lane, i]
+            for j in range(k):
+                x = log_match[p0 + lane, i, j] - log_u
+                if x > LOG_NEGLIGIBLE:
+                    w[i, j, lane] = math.exp(x)
+                    active[i, j] = True
+                else:
+                    w[i, j, lane] = 0.0
     for i in range(s):
-        for j in range(k):
-            any_term = False
-            for lane in range(nl):
-                x = log_match[p0 + lane, i, j] - log_unheard[p0 + lane, i]
-                w[i, j, lane] = math.exp(x) if x > LOG_NEGLIGIBLE else 0.0
-                any_term = any_term or x > LOG_NEGLIGIBLE
-            active[i, j] = any_term
         for q in range(pair_j.shape[0]):
             any_term = False
             for lane in range(nl):
@@ -134,9 +138,12 @@ def associate_kernel(
     total = np.empty(LANES)
     active = np.empty((s, k), dtype=np.bool_)
     active_pair = np.empty((s, n_pairs), dtype=np.bool_)
+    heard = np.empty(s, dtype=np.bool_)  # beacon i has a term above 1e-300 in the block
     for p0 in range(0, n, LANES):
         nl = min(LANES, n - p0)
         _weights(log_match, log_unheard, p0, nl, pair_j, pair_e, w, pw, active, active_pair)
+        for i in range(s):
+            heard[i] = active[i].any() or active_pair[i].any()
         for m in range(n_masks):
             for lane in range(nl):
                 fwd[0, m, lane] = 0.0
@@ -150,12 +157,13 @@ def associate_kernel(
                 for m in range(n_masks):
                     for lane in range(nl):
                         table[m, lane] = fwd[i, m, lane]
-            _forward_stage(w, pw, i, k, pair_j, pair_jj, nl, table, active, active_pair)
             log_scale = fwd_log[i + 1] if marginals else fwd_log[0]
             if marginals:
                 for lane in range(nl):
                     log_scale[lane] = fwd_log[i, lane]
-            _bound_step(w, pw, i, nl, table, bound, log_scale)
+            if heard[i]:  # else F_i = F_{i-1} and the bound does not grow: nothing to do
+                _forward_stage(w, pw, i, k, pair_j, pair_jj, nl, table, active, active_pair)
+                _bound_step(w, pw, i, nl, table, bound, log_scale)
         last = fwd[s] if marginals else fwd[0]
         last_log = fwd_log[s] if marginals else fwd_log[0]
         for lane in range(nl):
@@ -208,5 +216,6 @@ def associate_kernel(
                     p_match[p0 + lane, i, pair_j[q]] += pair
                     p_match[p0 + lane, i, pair_jj[q]] += pair
                     p_echo[p0 + lane, i, pair_jj[q]] += pair
-            _backward_stage(w, pw, i, k, pair_j, pair_jj, nl, bwd, active, active_pair)
-            _bound_step(w, pw, i, nl, bwd, bound, bwd_log)
+            if heard[i]:
+                _backward_stage(w, pw, i, k, pair_j, pair_jj, nl, bwd, active, active_pair)
+                _bound_step(w, pw, i, nl, bwd, bound, bwd_log)
