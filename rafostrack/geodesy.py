@@ -140,4 +140,7 @@ def local_offsets_km(
 
 def wrap_lon(lon_deg: ArrayLike) -> NDArray:
     """Longitude wrapped to [-180, 180)."""
-    return (np.asarray(lon_deg) + 180.0) % 360.0 - 180.0
+    shifted = np.asarray(lon_deg) + 180.0
+    if not ((shifted >= 0.0) & (shifted < 360.0)).all():  # else the remainder is `shifted` itself
+        shifted = shifted % 360.0  # (numpy's float remainder is slow: skipped when it changes nothing)
+    return shifted - 180.0
