@@ -84,3 +84,5 @@ def test_displace_and_offsets_round_trip():
 
 def test_wrap_lon():
     assert np.allclose(wrap_lon([180.0, -180.0, 190.0, 359.0, -181.0]), [-180.0, -180.0, -170.0, -1.0, 179.0])
+    assert np.allclose(wrap_lon([-180.0, 0.1, 179.9]), [-180.0, 0.1, 179.9])  # all in range: no remainder taken
+    assert wrap_lon(540.0) == -180.0 and wrap_lon(-10.0) == pytest.approx(-10.0)
