@@ -175,6 +175,11 @@ def association_factors(
     n, s = mu.shape
     k = np.shape(toa_s)[-1]
     log_match, log_unheard = np.empty((n, s, k)), np.empty((n, s))
+    log_echo = None
+    signal_term = np.empty((0, k))
+    if model.echo_fraction > 0 and k:  # the echo terms' per-signal part joins log w_ij in the kernel
+        no_echo, log_echo = echo_factors(toa_s, h, lam, model)
+        signal_term = np.atleast_2d(no_echo)
     factors_kernel(
         mu,
         np.ascontiguousarray(np.broadcast_to(p_detect, mu.shape), dtype=np.float64),
@@ -185,13 +190,10 @@ def association_factors(
         float(np.log(lam)),
         np.atleast_1d(np.asarray(h, dtype=np.float64)),
         ranked,
+        signal_term,
         log_match,
         log_unheard,
     )
-    log_echo = None
-    if model.echo_fraction > 0 and k:
-        no_echo, log_echo = echo_factors(toa_s, h, lam, model)
-        log_match = log_match + no_echo[..., None, :]
     if source_log_ratio is not None and k:
         log_match = log_match + source_log_ratio[None, None, :]
         log_echo = None if log_echo is None else log_echo + source_log_ratio[None, :]

@@ -127,13 +127,17 @@ def log_ndtr_ufunc(z):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def factors_kernel(mu, p_detect, toa, sigma, eps, tau, log_lam, h, ranked, log_match, log_unheard):  # pragma: no cover
+def factors_kernel(  # pragma: no cover - compiled
+    mu, p_detect, toa, sigma, eps, tau, log_lam, h, ranked, signal_term, log_match, log_unheard
+):
     """log w_ij (P, s, K) and log u_i (P, s) of one window (module docstring): `toa`
     (1 or P, K) and the horizon `h` (1 or P,), one row shared by all particles, or one per
-    particle (a batch of windows)."""
+    particle (a batch of windows); `signal_term` (rows of `toa`, K), added to every
+    log w_ij of signal j (e.g. the echo model's), or (0, K): none."""
     n, s = mu.shape
     k = toa.shape[1]
     shared = toa.shape[0] == 1
+    added = signal_term.shape[0] > 0
     c = constants(sigma, eps, tau)
     early = -FAR_EARLY * sigma
     late = FAR_LATE * tau if eps > 0.0 else FAR_LATE_DIRECT * sigma
@@ -145,6 +149,8 @@ def factors_kernel(mu, p_detect, toa, sigma, eps, tau, log_lam, h, ranked, log_m
                 r = toa[row, j] - mu[p, i]
                 if r < early or r > late:
                     log_match[p, i, j] = -np.inf
+                elif added:
+                    log_match[p, i, j] = (log_pd + logpdf_c(r, c) - log_lam) + signal_term[row, j]
                 else:
                     log_match[p, i, j] = log_pd + logpdf_c(r, c) - log_lam
             if ranked:

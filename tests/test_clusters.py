@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from rafostrack import clusters
 from rafostrack.clusters import mode_labels
 from rafostrack.geodesy import local_offsets_km
 
@@ -39,9 +40,12 @@ def oracle_modes(lat: np.ndarray, lon: np.ndarray, weights: np.ndarray, link_km:
     return rank[labels]
 
 
+@pytest.mark.parametrize("cells_per_particle", [0, 10**9], ids=["sorted", "dense"])
 @pytest.mark.parametrize("seed", range(40))
-def test_modes_match_the_oracle(seed: int) -> None:
-    """Clouds of 1-4 blobs, compact to spread over many cells, equal and random weights."""
+def test_modes_match_the_oracle(seed: int, cells_per_particle: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Clouds of 1-4 blobs, compact to spread over many cells, equal and random weights;
+    components found by sorting the cells and on a dense grid of them."""
+    monkeypatch.setattr(clusters, "_DENSE_CELLS_PER_PARTICLE", cells_per_particle)
     rng = np.random.default_rng(seed)
     n, k = int(rng.integers(1, 300)), int(rng.integers(1, 5))
     centre = rng.normal(0.0, rng.uniform(0.05, 1.5), (k, 2))
