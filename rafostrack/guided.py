@@ -127,10 +127,7 @@ class GuidedDrift:
     def _means(self, ancestors: Particles) -> NDArray[np.float64]:
         """The means m'_i (P, d), each in its ancestor's plane."""
         tr = self._transition
-        state = np.zeros((len(ancestors), tr.dim))
-        if self.motion.has_velocity:
-            state[:, 2:] = ancestors.velocity_km_per_day
-        mean = state @ tr.A.T + tr.b
+        mean = self.motion.origin_states(ancestors) @ tr.A.T + tr.b
         east, north = local_offsets_km(ancestors.lat, ancestors.lon, self.summary.lat0, self.summary.lon0)
         lam = self.summary.precision
         innovation = self.summary.shift - (np.column_stack([east, north]) + mean[:, :2]) @ lam

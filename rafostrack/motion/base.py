@@ -104,18 +104,27 @@ class MotionModel(ABC):
         kernel for the plain models, more for a mixture such as `JumpMixture`."""
         return [(1.0, self.transition(dt_days))]
 
+    def origin_states(self, particles: Particles) -> NDArray[np.float64]:
+        """Tangent-plane states (P, d) of particles, each at the origin of its own plane:
+        position (0, 0), then the velocity if the model has one."""
+        state = np.zeros((len(particles), self.dim))
+        if self.has_velocity:
+            if particles.velocity_km_per_day is None:
+                raise ValueError(f"motion model {self.name!r} needs particles with a velocity")
+            state[:, 2:] = particles.velocity_km_per_day
+        return state
+
     def plane_states(self, now: Particles, nxt: Particles) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Tangent-plane states (P, d) of `now` (at the origin) and of `nxt` (its offset from
         `now` in `now`'s tangent plane), particle by particle, with velocities if any."""
-        east, north = local_offsets_km(nxt.lat, nxt.lon, now.lat, now.lon)
-        zero = np.zeros(len(now))
-        a, b = [zero, zero], [east, north]
+        origin = self.origin_states(now)
+        offset = origin.copy()
+        offset[:, 0], offset[:, 1] = local_offsets_km(nxt.lat, nxt.lon, now.lat, now.lon)
         if self.has_velocity:
-            if now.velocity_km_per_day is None or nxt.velocity_km_per_day is None:
+            if nxt.velocity_km_per_day is None:
                 raise ValueError(f"motion model {self.name!r} needs particles with a velocity")
-            a += list(now.velocity_km_per_day.T)
-            b += list(nxt.velocity_km_per_day.T)
-        return np.column_stack(a), np.column_stack(b)
+            offset[:, 2:] = nxt.velocity_km_per_day
+        return origin, offset
 
     def log_transition(self, now: Particles, nxt: Particles, dt_days: float) -> NDArray[np.float64]:
         """log f(nxt_p | now_p, dt) for each particle p (the mixture over `components`)."""
@@ -157,12 +166,7 @@ class MotionModel(ABC):
         """The transition with given standard-normal `noise` (shape (dim, P)): deterministic,
         so a simulator can reuse the same noise (e.g. to bridge a track to an end fix)."""
         tr = self.transition(max(dt_days, 0.0))
-        n = len(particles)
-        state = np.zeros((tr.dim, n))
-        if self.has_velocity:
-            if particles.velocity_km_per_day is None:
-                raise ValueError(f"motion model {self.name!r} needs particles with a velocity")
-            state[2:] = particles.velocity_km_per_day.T
+        state = np.ascontiguousarray(self.origin_states(particles).T)
         # No BLAS: einsum's own loops give the same bits whatever the thread count.
         moved = np.einsum("ij,jp->ip", tr.A, state) + tr.b[:, None] + np.einsum("ij,jp->ip", tr.L, noise)
         return from_plane_states(particles, moved.T, self.has_velocity)
