@@ -123,11 +123,7 @@ class Reseeding:
         pick = rng.choice(len(log_pi), size=n, p=np.exp(log_pi))
         east, north = rng.normal(0.0, self.sd_km, size=(2, n))
         lat, lon = displace(lat_c[pick], lon_c[pick], east, north)
-        velocity = None
-        if self.motion.has_velocity:
-            mean, sd = self.motion.stationary_velocity()
-            velocity = np.ascontiguousarray((mean[:, None] + sd * rng.standard_normal((2, n))).T)
-        return Particles(lat, lon, velocity)
+        return Particles(lat, lon, self.motion.stationary_velocities(n, rng))
 
     def log_density(self, ancestors: Particles, particles: Particles) -> NDArray[np.float64]:
         """log q(x, v) of each particle (position mixture times the velocity law), whatever

@@ -151,15 +151,20 @@ class MotionModel(ABC):
         z = (particles.velocity_km_per_day - mean) / sd
         return -0.5 * np.einsum("pk,pk->p", z, z) - 2.0 * np.log(sd) - np.log(2.0 * np.pi)
 
+    def stationary_velocities(self, n: int, rng: np.random.Generator) -> NDArray[np.float64] | None:
+        """n velocities (n, 2) drawn from the stationary law (`stationary_velocity`); None
+        for a model without velocity (and no draw)."""
+        if not self.has_velocity:
+            return None
+        mean, sd = self.stationary_velocity()
+        return np.ascontiguousarray((mean[:, None] + sd * rng.standard_normal((2, n))).T)
+
     def initial(self, lat: float, lon: float, sd_km: float, n: int, rng: np.random.Generator) -> Particles:
         """n particles about a position fix with sd `sd_km` per axis; a velocity, where the
         model has one, drawn from its stationary law (position draws first, then velocity)."""
         east, north = rng.normal(0.0, sd_km, size=(2, n))
         new_lat, new_lon = displace(np.full(n, lat), np.full(n, lon), east, north)
-        velocity = None
-        if self.has_velocity:
-            mean, sd = self.stationary_velocity()
-            velocity = np.ascontiguousarray((mean[:, None] + sd * rng.standard_normal((2, n))).T)
+        velocity = self.stationary_velocities(n, rng)
         return Particles(np.clip(new_lat, -_MAX_LAT, _MAX_LAT), new_lon, velocity)
 
     def step(self, particles: Particles, dt_days: float, noise: NDArray[np.float64]) -> Particles:
