@@ -73,6 +73,7 @@ class ModelConfig:
     clutter_rate: float = setting("> 0 (use a small value for clean data)", _positive)
     multipath_fraction: float = setting("in [0, 1)", lambda v: 0 <= v < 1)
     multipath_delay_s: float = setting("> 0", _positive)
+    multipath_delay_shape: int = setting("1 or 2", lambda v: v in (1, 2))
     echo_fraction: float = setting("in [0, 1)", lambda v: 0 <= v < 1)
     detection_range_km: float = setting(">= 0 (0 = no range limit)", _non_negative)
     detection_falloff_km: float = setting("> 0", _positive)

@@ -2,9 +2,10 @@
 
 For a float at X and time t, beacon i's signal arrives (paper section 2, with clock terms)
     mu_i(X, t) = offset_i + drift_i * days_i(t) + range(X, b_i) / c + clock(t),
-with a TOA error density f (Gaussian with sd sigma, optionally mixed with an
-exponentially delayed copy for multipath). The float stores the first r signals in its
-window [0, W]; clutter is a Poisson process of rate lambda per window, uniform on [0, W].
+with a TOA error density f (Gaussian with sd sigma, optionally mixed with a delayed copy
+for multipath: a Gamma delay of mean tau and shape k = 1 (exponential) or 2, `model_kernels`).
+The float stores the first r signals in its window [0, W]; clutter is a Poisson process of
+rate lambda per window, uniform on [0, W].
 
 With K stored TOAs T_1 < ... < T_K the likelihood is a sum over partial matchings M of
 beacons to signals (paper eqs. 14-17):
@@ -17,8 +18,8 @@ is full (K = r: anything later could not have been stored), h = W otherwise. The
 `unranked` baseline (eq. 19) drops the ranking: u_i = 1 - Pd_i.
 
 Echoes (our extension): a detected signal also arrives a second time, by a longer path,
-with probability e (`echo_fraction`), Exp(mean tau) after the first (tau =
-`multipath_delay_s`); both are the source's. A beacon may then take a pair of signals
+with probability e (`echo_fraction`), after a delay of the multipath delay's law (mean tau =
+`multipath_delay_s`, shape k = `multipath_delay_shape`); both are the source's. A beacon may then take a pair of signals
 j < j': in the matching, a direct arrival without a stored echo weighs
 w_ij (1 - e G(h - T_j)) (no echo, or one after the horizon), a pair w_ij (1 - e G(h - T_j)) E_jj'
 with E_jj' = e g(T_j' - T_j) / (Lambda (1 - e G(h - T_j))), g and G the delay's density and
@@ -29,6 +30,7 @@ Arrays are shaped (particles, beacons, signals) = (P, s, K).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,15 +125,46 @@ def window_prediction(
 
 
 def toa_logpdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
-    """log f(r) for the TOA error r = T - mu: a Gaussian of sd sigma, mixed with an
-    exponentially delayed copy (multipath) of fraction eps and mean delay tau
+    """log f(r) for the TOA error r = T - mu: a Gaussian of sd sigma, mixed with a delayed
+    copy (multipath) of fraction eps, its delay Gamma of mean tau and shape k
     (`model_kernels`, where the formulas are)."""
-    return toa_logpdf_ufunc(resid_s, model.toa_sigma_s, model.multipath_fraction, model.multipath_delay_s)
+    return toa_logpdf_ufunc(
+        resid_s, model.toa_sigma_s, model.multipath_fraction, model.multipath_delay_s, model.multipath_delay_shape
+    )
 
 
 def toa_cdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
     """F(r) = P(T - mu <= r) for the density of `toa_logpdf` (`model_kernels`)."""
-    return toa_cdf_ufunc(resid_s, model.toa_sigma_s, model.multipath_fraction, model.multipath_delay_s)
+    return toa_cdf_ufunc(
+        resid_s, model.toa_sigma_s, model.multipath_fraction, model.multipath_delay_s, model.multipath_delay_shape
+    )
+
+
+def delay_log_shape(delay_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
+    """log of the multipath (and echo) delay density's shape factor, (x^(k-1) / (k - 1)!)
+    with x = d / theta: the density of a Gamma(k, theta = tau / k) delay d >= 0 is
+    g(d) = exp(-x) / theta * x^(k-1) / (k - 1)! (0 for k = 1: an exponential delay)."""
+    k = model.multipath_delay_shape
+    if k == 1:
+        return np.zeros(np.shape(delay_s))
+    with np.errstate(divide="ignore"):
+        return (k - 1) * np.log(np.clip(delay_s, 0.0, None) * (k / model.multipath_delay_s)) - math.lgamma(k)
+
+
+def delay_cdf(delay_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
+    """G(d) = P(delay <= d), 0 below 0: 1 - exp(-d / theta) sum_{n < k} (d / theta)^n / n!."""
+    k, theta = model.multipath_delay_shape, model.multipath_delay_s / model.multipath_delay_shape
+    x = np.clip(np.asarray(delay_s, dtype=np.float64), 0.0, None) / theta
+    if k == 1:
+        return -np.expm1(-x)
+    return -np.expm1(-x + np.log1p(sum(x**n / math.factorial(n) for n in range(1, k))))
+
+
+def multipath_delays(rng: np.random.Generator, model: ModelConfig, size: int | tuple[int, ...]) -> NDArray:
+    """Draws of the multipath (and echo) delay, Gamma(k, tau / k) (tau * a standard
+    exponential draw when k = 1)."""
+    k = model.multipath_delay_shape
+    return model.multipath_delay_s / k * rng.standard_gamma(k, size)
 
 
 def clutter_intensity(model: ModelConfig, window_s: float) -> float:
@@ -187,6 +220,7 @@ def association_factors(
         model.toa_sigma_s,
         model.multipath_fraction,
         model.multipath_delay_s,
+        model.multipath_delay_shape,
         float(np.log(lam)),
         np.atleast_1d(np.asarray(h, dtype=np.float64)),
         ranked,
@@ -204,16 +238,19 @@ def echo_factors(toa_s: NDArray, horizon: float | NDArray, lam: float, model: Mo
     """The echo terms of one window, shared by every particle and beacon (module docstring):
     log(1 - e G(h - T_j)) per signal, folded into the match factor of a direct arrival
     without a stored echo, and log E_jj' = log(e g(T_j' - T_j) / Lambda) - log(1 - e G(h - T_j))
-    for j < j' (-inf elsewhere), with g the delay density Exp(mean tau) and G its CDF.
-    Shapes (K,) and (K, K); for a batch of windows (`toa_s` (P, K), `horizon` (P,)), a row each."""
-    eps, tau = model.echo_fraction, model.multipath_delay_s
+    for j < j' (-inf elsewhere), with g the delay density (`delay_log_shape`) and G its CDF
+    (`delay_cdf`). Shapes (K,) and (K, K); for a batch of windows (`toa_s` (P, K), `horizon`
+    (P,)), a row each."""
+    eps = model.echo_fraction
     toa = np.asarray(toa_s)
     k = toa.shape[-1]
-    no_echo = np.log1p(-eps * -np.expm1(-np.clip(np.asarray(horizon)[..., None] - toa, 0.0, None) / tau))
-    delay = toa[..., None, :] - toa[..., :, None]  # (j, j'): T_j' - T_j
+    no_echo = np.log1p(-eps * delay_cdf(np.asarray(horizon)[..., None] - toa, model))
+    delay = np.clip(toa[..., None, :] - toa[..., :, None], 0.0, None)  # (j, j'): T_j' - T_j
     later = np.triu(np.ones((k, k), dtype=bool), k=1)
+    theta = model.multipath_delay_s / model.multipath_delay_shape
     with np.errstate(divide="ignore"):
-        log_pair = np.where(later, np.log(eps / tau) - np.clip(delay, 0.0, None) / tau - np.log(lam), -np.inf)
+        log_g = np.log(eps / theta) - delay / theta + delay_log_shape(delay, model)  # log e g(d)
+    log_pair = np.where(later, log_g - np.log(lam), -np.inf)
     return no_echo, log_pair - no_echo[..., :, None]
 
 

@@ -2,26 +2,40 @@
 the association factors of a window for many particles at once.
 
 A direct arrival's error is Gaussian, r ~ N(0, sigma^2); a fraction eps of arrivals comes by
-a longer path, delayed by an Exp(mean tau) delay, r = g + d (an exponentially modified
-Gaussian, EMG). With z = r / sigma:
+a longer path, delayed by d, r = g + d. The delay is Gamma(shape k, scale theta = tau / k),
+mean tau, with k = 1 (an exponential: an exponentially modified Gaussian, EMG) or k = 2 (an
+Erlang delay, no mass at 0: a reflected path is never as short as the direct one). With
+z = r / sigma, u = z - sigma / theta, c = sigma^2 / (2 theta^2) - r / theta, and
+psi(u) = u Phi(u) + phi(u) (the integral of Phi up to u):
 
-    f(r) = (1 - eps) phi(z) / sigma + eps EMG(r),
-    log EMG(r) = -log tau + sigma^2 / (2 tau^2) - r / tau + log Phi(z - sigma / tau),
-    F(r) = Phi(z) - eps exp(sigma^2 / (2 tau^2) - r / tau) Phi(z - sigma / tau).
+    f(r) = (1 - eps) phi(z) / sigma + eps f_d(r),
+    k = 1: log f_d(r) = -log theta + c + log Phi(u),
+           F_d(r) = Phi(z) - exp(c) Phi(u);
+    k = 2: log f_d(r) = log sigma - 2 log theta + c + log psi(u),
+           F_d(r) = Phi(z) - exp(c) (Phi(u) + (sigma / theta) psi(u)),
+    F(r) = (1 - eps) Phi(z) + eps F_d(r).
+
+(From the integrals over d > 0 of d^(k-1) exp(-d / theta) phi((r - d) / sigma), which
+complete the square to Gaussian moments about r - sigma^2 / theta.)
 
 `log_ndtr` is log Phi accurate in both tails: log(erfc(-z / sqrt 2) / 2) down to z = -35,
 below it the asymptotic series log Phi(z) = -z^2/2 - log(-z) - log sqrt(2 pi)
-+ log(1 - 1/z^2 + 3/z^4 - 15/z^6 + 105/z^8 - 945/z^10) (error < 1e-14 there).
++ log(1 - 1/z^2 + 3/z^4 - 15/z^6 + 105/z^8 - 945/z^10) (error < 1e-14 there). `log_psi`
+likewise: log psi(u) directly above u = -35 (phi(u) - |u| Phi(u) loses about log10(u^2)
+digits to cancellation there, < 4), below it log psi(u) = log phi(u) - 2 log(-u)
++ log(1 - 3/u^2 + 15/u^4 - 105/u^6 + 945/u^8 - 10395/u^10).
 
 The scalar functions (`logpdf_c`, `cdf_c`, with constants computed once by `constants`) are
-compiled by numba and called from `factors_kernel`; `toa_logpdf_ufunc` and `toa_cdf_ufunc`
-are the same code as numpy ufuncs (broadcasting over arrays), so every caller uses one
-implementation. (Kernels calling one another live in this one module: numba's cache of a
-kernel is refreshed when its own file changes, not when a kernel it calls elsewhere does.)
+compiled by numba and inlined into `factors_kernel` (numba's IR inlining: the delay law's
+branch then costs nothing measurable; without it the kernel ran 4-9% slower);
+`toa_logpdf_ufunc` and `toa_cdf_ufunc` are the same code as numpy ufuncs (broadcasting over
+arrays), so every caller uses one implementation. (Kernels calling one another live in this
+one module: numba's cache of a kernel is refreshed when its own file changes, not when a
+kernel it calls elsewhere does.)
 
 `factors_kernel` computes log w_ij and log u_i (`model` module docstring) in one pass. A
 signal more than `FAR_EARLY` sds before a beacon's predicted arrival, or more than
-`FAR_LATE` multipath delays after it (`FAR_LATE_DIRECT` sds when there is no multipath), gets
+`FAR_LATE` mean multipath delays after it (`FAR_LATE_DIRECT` sds without multipath), gets
 log w_ij = -inf: its density there is below e^-40 of its peak, so the term weighs less than
 ~1e-16 of the unmatched option (which weighs 1) and changes log Z by less than ~1e-15; the
 engines skip such terms.
@@ -58,27 +72,46 @@ def ndtr(z: float) -> float:  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def constants(sigma: float, eps: float, tau: float):  # pragma: no cover - compiled
-    """The density's constants, computed once per call of a kernel: (sigma, eps, 1 / tau,
-    sigma / tau, log(1 - eps) - log sigma - log sqrt(2 pi), log eps - log tau + sigma^2 / (2 tau^2),
-    sigma^2 / (2 tau^2))."""
-    log_direct = math.log1p(-eps) - math.log(sigma) - _LOG_SQRT_2PI
-    half_shift2 = sigma * sigma / (2.0 * tau * tau)
-    log_delayed = (math.log(eps) - math.log(tau) + half_shift2) if eps > 0.0 else -math.inf
-    return sigma, eps, 1.0 / tau, sigma / tau, log_direct, log_delayed, half_shift2
+def log_psi(u: float) -> float:  # pragma: no cover - compiled
+    """log psi(u), psi(u) = u Phi(u) + phi(u) (module docstring)."""
+    if u > -35.0:
+        return math.log(u * ndtr(u) + math.exp(-0.5 * u * u - _LOG_SQRT_2PI))
+    q = 1.0 / (u * u)
+    series = 1.0 - q * (3.0 - q * (15.0 - q * (105.0 - q * (945.0 - q * 10395.0))))
+    return -0.5 * u * u - _LOG_SQRT_2PI - 2.0 * math.log(-u) + math.log(series)
 
 
 @njit(cache=True, nogil=True)
+def constants(sigma: float, eps: float, tau: float, shape: int):  # pragma: no cover - compiled
+    """The density's constants, computed once per call of a kernel (theta = tau / shape):
+    (sigma, eps, 1 / theta, sigma / theta, log(1 - eps) - log sigma - log sqrt(2 pi),
+    log eps + the delayed part's constant (module docstring), sigma^2 / (2 theta^2), shape)."""
+    theta = tau / shape
+    log_direct = math.log1p(-eps) - math.log(sigma) - _LOG_SQRT_2PI
+    half_shift2 = sigma * sigma / (2.0 * theta * theta)
+    if eps == 0.0:
+        log_delayed = -math.inf
+    elif shape == 1:
+        log_delayed = math.log(eps) - math.log(theta) + half_shift2
+    else:
+        log_delayed = math.log(eps) + math.log(sigma) - 2.0 * math.log(theta) + half_shift2
+    return sigma, eps, 1.0 / theta, sigma / theta, log_direct, log_delayed, half_shift2, shape
+
+
+@njit(cache=True, nogil=True, inline="always")
 def logpdf_c(r: float, c) -> float:  # pragma: no cover - compiled
-    """log f(r) with the `constants` c. Where z - sigma / tau > 8, Phi(z - sigma / tau) is 1
-    to double precision and is not evaluated."""
-    sigma, eps, inv_tau, shift, log_direct, log_delayed, _ = c
+    """log f(r) with the `constants` c. For k = 1, where u > 8, Phi(u) is 1 to double
+    precision and is not evaluated."""
+    sigma, eps, inv_theta, shift, log_direct, log_delayed, _, shape = c
     z = r / sigma
     a = log_direct - 0.5 * z * z
     if eps == 0.0:
         return a
     u = z - shift
-    b = log_delayed - r * inv_tau + (log_ndtr(u) if u < 8.0 else 0.0)
+    if shape == 1:
+        b = log_delayed - r * inv_theta + (log_ndtr(u) if u < 8.0 else 0.0)
+    else:
+        b = log_delayed - r * inv_theta + log_psi(u)
     top = max(a, b)
     gap = abs(a - b)
     if gap > _EXP_UNDERFLOW:  # exp(-gap) is 0.0: the sum below is `top`, bit for bit
@@ -86,10 +119,10 @@ def logpdf_c(r: float, c) -> float:  # pragma: no cover - compiled
     return top + math.log1p(math.exp(-gap))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def cdf_c(r: float, c) -> float:  # pragma: no cover - compiled
     """F(r) with the `constants` c; 0 below -40 sigma and its tail's closed form above."""
-    sigma, eps, inv_tau, shift, _, _, half_shift2 = c
+    sigma, eps, inv_theta, shift, _, _, half_shift2, shape = c
     z = r / sigma
     if z < -40.0:
         return 0.0
@@ -97,28 +130,34 @@ def cdf_c(r: float, c) -> float:  # pragma: no cover - compiled
     if eps == 0.0:
         return gauss
     u = z - shift
-    tail = math.exp(half_shift2 - r * inv_tau + (log_ndtr(u) if u < 8.0 else 0.0))
+    log_phi_u = log_ndtr(u) if u < 8.0 else 0.0
+    if shape == 1:
+        tail = math.exp(half_shift2 - r * inv_theta + log_phi_u)
+    else:
+        b = math.log(shift) + log_psi(u)
+        top = max(log_phi_u, b)
+        tail = math.exp(half_shift2 - r * inv_theta + top + math.log1p(math.exp(-abs(log_phi_u - b))))
     return (1.0 - eps) * gauss + eps * (gauss - tail)
 
 
 @njit(cache=True, nogil=True)
-def _logpdf(r: float, sigma: float, eps: float, tau: float) -> float:  # pragma: no cover - compiled
-    return logpdf_c(r, constants(sigma, eps, tau))
+def _logpdf(r: float, sigma: float, eps: float, tau: float, shape: int) -> float:  # pragma: no cover - compiled
+    return logpdf_c(r, constants(sigma, eps, tau, shape))
 
 
 @njit(cache=True, nogil=True)
-def _cdf(r: float, sigma: float, eps: float, tau: float) -> float:  # pragma: no cover - compiled
-    return cdf_c(r, constants(sigma, eps, tau))
+def _cdf(r: float, sigma: float, eps: float, tau: float, shape: int) -> float:  # pragma: no cover - compiled
+    return cdf_c(r, constants(sigma, eps, tau, shape))
 
 
-@vectorize(["float64(float64, float64, float64, float64)"], cache=True)
-def toa_logpdf_ufunc(r, sigma, eps, tau):  # pragma: no cover - compiled
-    return _logpdf(r, sigma, eps, tau)
+@vectorize(["float64(float64, float64, float64, float64, int64)"], cache=True)
+def toa_logpdf_ufunc(r, sigma, eps, tau, shape):  # pragma: no cover - compiled
+    return _logpdf(r, sigma, eps, tau, shape)
 
 
-@vectorize(["float64(float64, float64, float64, float64)"], cache=True)
-def toa_cdf_ufunc(r, sigma, eps, tau):  # pragma: no cover - compiled
-    return _cdf(r, sigma, eps, tau)
+@vectorize(["float64(float64, float64, float64, float64, int64)"], cache=True)
+def toa_cdf_ufunc(r, sigma, eps, tau, shape):  # pragma: no cover - compiled
+    return _cdf(r, sigma, eps, tau, shape)
 
 
 @vectorize(["float64(float64)"], cache=True)
@@ -128,7 +167,7 @@ def log_ndtr_ufunc(z):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def factors_kernel(  # pragma: no cover - compiled
-    mu, p_detect, toa, sigma, eps, tau, log_lam, h, ranked, signal_term, log_match, log_unheard
+    mu, p_detect, toa, sigma, eps, tau, shape, log_lam, h, ranked, signal_term, log_match, log_unheard
 ):
     """log w_ij (P, s, K) and log u_i (P, s) of one window (module docstring): `toa`
     (1 or P, K) and the horizon `h` (1 or P,), one row shared by all particles, or one per
@@ -138,7 +177,7 @@ def factors_kernel(  # pragma: no cover - compiled
     k = toa.shape[1]
     shared = toa.shape[0] == 1
     added = signal_term.shape[0] > 0
-    c = constants(sigma, eps, tau)
+    c = constants(sigma, eps, tau, shape)
     early = -FAR_EARLY * sigma
     late = FAR_LATE * tau if eps > 0.0 else FAR_LATE_DIRECT * sigma
     for p in range(n):

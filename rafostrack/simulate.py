@@ -27,9 +27,9 @@ truth at the window time. In each window, for each beacon active then
 including source drift and the float clock offset):
   * the signal is detected with probability Pd(range);
   * a detected signal arrives at mu + e, e ~ N(0, toa_sigma_s^2), plus, with probability
-    `multipath_fraction`, an Exponential(mean `multipath_delay_s`) delay; with probability
-    `echo_fraction` a detected signal arrives a second time, an Exponential(mean
-    `multipath_delay_s`) later (an echo, labelled with its source);
+    `multipath_fraction`, a Gamma(shape `multipath_delay_shape`, mean `multipath_delay_s`)
+    delay (`model.multipath_delays`); with probability `echo_fraction` a detected signal
+    arrives a second time, after another such delay (an echo, labelled with its source);
   * clutter: N ~ Poisson(`clutter_rate`) signals, uniform on [0, window_s].
 Arrival times are quantised to `TOA_RESOLUTION_S` (0.01 s, the files' resolution; signals
 that then coincide are one received signal, keeping the first label in beacon-table order,
@@ -39,9 +39,9 @@ float stores the earliest `max_signals`; each stored TOA keeps the beacon that p
 
 Random draws per float: the launch eddy velocity (2 normals), then 4 normals per drift
 step; then per window, always in this order and whatever their use: uniform (detection),
-normal (TOA error), uniform (multipath) and standard exponential (delay), one of each per
-active beacon; when `echo_fraction` > 0, a uniform (echo) and a standard exponential (its
-delay) per active beacon; then the clutter count and its times.
+normal (TOA error), uniform (multipath) and standard gamma (delay; a standard exponential
+when the shape is 1), one of each per active beacon; when `echo_fraction` > 0, a uniform
+(echo) and a standard gamma (its delay) per active beacon; then the clutter count and its times.
 
 Scenarios are in `rafostrack.scenarios`; `rafostrack.io.mission_writer.write_mission`
 writes a mission directory that `rafostrack track` reads, with the true labels as hand
@@ -63,7 +63,7 @@ from numpy.typing import NDArray
 from .config import ModelConfig
 from .domain import ArrivalRecord, BeaconTable, FloatInfo, Particles, Window
 from .geodesy import local_offsets_km, wrap_lon
-from .model import beacon_ranges_m, detection_prob, predicted_toa_s, window_beacons
+from .model import beacon_ranges_m, detection_prob, multipath_delays, predicted_toa_s, window_beacons
 from .motion import IntegratedOU
 
 TOA_RESOLUTION_S = 0.01
@@ -248,14 +248,14 @@ def simulate_arrivals(
         u_det = rng.random(s)
         err = model.toa_sigma_s * rng.standard_normal(s)
         u_mp = rng.random(s)
-        delay = model.multipath_delay_s * rng.standard_exponential(s)
+        delay = multipath_delays(rng, model, s)
         detected = u_det < pd_i
         toa = mu + err + np.where(u_mp < model.multipath_fraction, delay, 0.0)
         echoes = np.zeros(0)
         echo_ids = np.zeros(0, dtype=object)
         if model.echo_fraction > 0:  # drawn only then: records without echoes keep their draws
             u_echo = rng.random(s)
-            echo_delay = model.multipath_delay_s * rng.standard_exponential(s)
+            echo_delay = multipath_delays(rng, model, s)
             echoed = detected & (u_echo < model.echo_fraction)
             echoes, echo_ids = (toa + echo_delay)[echoed], ids[wb.index[echoed]]
         n_clutter = int(rng.poisson(model.clutter_rate))

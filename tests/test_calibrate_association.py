@@ -116,19 +116,25 @@ def test_fit_multipath_recovers_the_mixture(eps, tau):
         assert abs(got_tau / tau - 1) < 0.15
 
 
+@pytest.mark.parametrize("shape", [1, 2])
 @pytest.mark.parametrize(
-    ("resid", "sigma", "tau"), [(0.0, 1.5, 30.0), (5.0, 1.5, 30.0), (40.0, 2.0, 20.0), (-3.0, 1.0, 50.0)]
+    ("resid", "sigma", "tau"),
+    [(0.0, 1.5, 30.0), (5.0, 1.5, 30.0), (40.0, 2.0, 20.0), (-3.0, 1.0, 50.0), (-12.0, 1.0, 10.0)],
 )
-def test_delay_mean_is_the_posterior_mean_of_the_delay(resid, sigma, tau):
-    """E[d | r] for r = g + d, g ~ N(0, sigma^2), d ~ Exp(mean tau), by quadrature."""
+def test_delay_mean_is_the_posterior_mean_of_the_delay(resid, sigma, tau, shape):
+    """E[d | r] for r = g + d, g ~ N(0, sigma^2), d ~ Gamma(shape k, mean tau), by quadrature."""
 
     def weight(d):
-        return stats.norm.pdf(resid - d, scale=sigma) * np.exp(-d / tau)
+        return stats.norm.pdf(resid - d, scale=sigma) * stats.gamma.pdf(d, shape, scale=tau / shape)
 
     hi = max(resid, 0.0) + 40 * sigma
-    norm = integrate.quad(weight, 0.0, hi, points=[max(resid, 0.0)], limit=200)[0]
-    mean = integrate.quad(lambda d: d * weight(d), 0.0, hi, points=[max(resid, 0.0)], limit=200)[0] / norm
-    assert float(_delay_mean(np.array(resid), sigma, tau)) == pytest.approx(mean, rel=1e-6, abs=1e-8)
+    # breakpoints where the weight lives: at r, and within sigma^2 / |r| of 0 when r < 0 (a
+    # weight of ~e^-70 there: relative tolerance only)
+    points = sorted({max(resid, 0.0), 0.1 * sigma, sigma})
+    norm = integrate.quad(weight, 0.0, hi, points=points, epsabs=0.0, epsrel=1e-12, limit=200)[0]
+    mean = integrate.quad(lambda d: d * weight(d), 0.0, hi, points=points, epsabs=0.0, epsrel=1e-12, limit=200)[0]
+    mean /= norm
+    assert float(_delay_mean(np.array(resid), sigma, tau, shape)) == pytest.approx(mean, rel=1e-6, abs=1e-8)
 
 
 def test_clutter_rate_counts_clutter_over_the_exposed_time():

@@ -12,7 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 from geographiclib.geodesic import Geodesic
-from scipy import integrate
+from scipy import integrate, stats
 
 from rafostrack import model as m
 from rafostrack.config import load_config
@@ -39,10 +39,16 @@ def _loglik(mu, p_detect, toas, max_signals, window_s, model, ranked=True) -> fl
     return float(f.log_base + exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo).log_z[0])
 
 
-@pytest.mark.parametrize("multipath", [0.0, 0.2])
-def test_likelihood_integrates_to_one_r1(multipath):
+@pytest.mark.parametrize(("multipath", "shape"), [(0.0, 1), (0.2, 1), (0.2, 2)])
+def test_likelihood_integrates_to_one_r1(multipath, shape):
     """r = 1, three beacons (one near the window's end): P(K=0) + int p(T1) dT1 = 1."""
-    model = _model(toa_sigma_s=2.0, clutter_rate=0.7, multipath_fraction=multipath, multipath_delay_s=5.0)
+    model = _model(
+        toa_sigma_s=2.0,
+        clutter_rate=0.7,
+        multipath_fraction=multipath,
+        multipath_delay_s=5.0,
+        multipath_delay_shape=shape,
+    )
     mu, w = np.array([8.0, 14.0, 39.0]), 40.0
     p0 = np.exp(_loglik(mu, 0.8, [], 1, w, model))
     p1, _ = integrate.quad(lambda t: np.exp(_loglik(mu, 0.8, [t], 1, w, model)), 0, w, points=list(mu), limit=200)
@@ -61,9 +67,18 @@ def test_likelihood_integrates_to_one_r2():
     assert p0 + p1 + p2 == pytest.approx(1.0, abs=1e-6)
 
 
-def test_likelihood_with_echoes_integrates_to_one_r2():
-    """r = 2, two beacons, echoes (40%) and multipath: P(K=0) + int p(T1) + int int p(T1, T2) = 1."""
-    model = _model(toa_sigma_s=1.5, clutter_rate=1.3, multipath_fraction=0.1, multipath_delay_s=3.0, echo_fraction=0.4)
+@pytest.mark.parametrize("shape", [1, 2])
+def test_likelihood_with_echoes_integrates_to_one_r2(shape):
+    """r = 2, two beacons, echoes (40%) and multipath, exponential or Erlang-2 delays:
+    P(K=0) + int p(T1) + int int p(T1, T2) = 1."""
+    model = _model(
+        toa_sigma_s=1.5,
+        clutter_rate=1.3,
+        multipath_fraction=0.1,
+        multipath_delay_s=3.0,
+        multipath_delay_shape=shape,
+        echo_fraction=0.4,
+    )
     mu, w, pd = np.array([6.0, 12.0]), 20.0, 0.75
     p0 = np.exp(_loglik(mu, pd, [], 2, w, model))
     p1, _ = integrate.quad(lambda t: np.exp(_loglik(mu, pd, [t], 2, w, model)), 0, w, points=list(mu), limit=200)
@@ -107,16 +122,61 @@ def test_ranking_penalises_a_beacon_predicted_early_but_not_stored():
     assert unranked_gap == pytest.approx(0.0, abs=1e-9)
 
 
-@pytest.mark.parametrize("eps", [0.0, 0.3])
-def test_toa_density_and_cdf_agree(eps):
+@pytest.mark.parametrize(("eps", "shape"), [(0.0, 1), (0.3, 1), (0.3, 2)])
+def test_toa_density_and_cdf_agree(eps, shape):
     """f integrates to 1 and F is its integral, with and without the multipath tail."""
-    model = _model(toa_sigma_s=2.0, multipath_fraction=eps, multipath_delay_s=15.0)
+    model = _model(toa_sigma_s=2.0, multipath_fraction=eps, multipath_delay_s=15.0, multipath_delay_shape=shape)
 
     def density(r):
         return np.exp(m.toa_logpdf(np.array(r), model))
 
     assert integrate.quad(density, -50, 400, limit=200)[0] == pytest.approx(1.0, abs=1e-8)
     assert m.toa_cdf(np.array(7.0), model) == pytest.approx(integrate.quad(density, -50, 7.0, limit=200)[0], abs=1e-8)
+
+
+@pytest.mark.parametrize("shape", [1, 2])
+@pytest.mark.parametrize(("sigma", "eps", "tau"), [(2.0, 0.1, 20.0), (1.0, 0.3, 5.0), (5.0, 0.2, 8.0)])
+def test_toa_density_is_the_gaussian_delay_convolution(sigma, eps, tau, shape):
+    """f(r) = (1 - eps) N(r; 0, sigma^2) + eps int_0^inf Gamma(d; k, tau / k) N(r - d; 0, sigma^2) dd,
+    the integral by quadrature over scipy's densities, from 8 sds below the prediction to
+    50 mean delays after it; F(r) the same law's probability by quadrature of that f."""
+    model = _model(toa_sigma_s=sigma, multipath_fraction=eps, multipath_delay_s=tau, multipath_delay_shape=shape)
+
+    def density(r: float) -> float:
+        def delayed(d: float) -> float:
+            return stats.gamma.pdf(d, shape, scale=tau / shape) * stats.norm.pdf(r - d, scale=sigma)
+
+        lo, hi = max(r - 12 * sigma, 0.0), max(r + 12 * sigma, 0.0)  # where the Gaussian factor lives
+        tail = integrate.quad(delayed, lo, hi, epsabs=0.0, epsrel=1e-11, limit=400)[0] if hi > lo else 0.0
+        return (1 - eps) * stats.norm.pdf(r, scale=sigma) + eps * tail
+
+    for r in np.r_[-8 * sigma, -2 * sigma, 0.0, 0.7 * sigma, 3 * sigma, tau / 2, tau, 4 * tau, 50 * tau]:
+        assert np.exp(m.toa_logpdf(np.array(r), model)) == pytest.approx(density(r), rel=1e-8)
+    for r in (-2 * sigma, 0.0, tau, 5 * tau):
+        f_r = integrate.quad(density, -20 * sigma, r, epsabs=1e-13, limit=400, points=[0.0] if r > 0 else None)[0]
+        assert m.toa_cdf(np.array(r), model) == pytest.approx(f_r, abs=1e-10)
+
+
+@pytest.mark.parametrize("shape", [1, 2])
+def test_delay_law_draws_density_and_cdf_agree(shape):
+    """Draws of `multipath_delays` have mean tau and variance tau^2 / k; `delay_cdf` is the
+    integral of exp(log(1 / theta) - d / theta + `delay_log_shape`) and matches the draws'
+    empirical CDF; with k = 1 the draws are tau times the generator's exponential draws."""
+    model = _model(multipath_delay_s=24.0, multipath_delay_shape=shape)
+    theta = 24.0 / shape
+    draws = m.multipath_delays(np.random.default_rng(5), model, 200_000)
+    assert draws.mean() == pytest.approx(24.0, rel=0.01)
+    assert draws.var() == pytest.approx(24.0**2 / shape, rel=0.02)
+
+    def density(d: float) -> float:
+        return float(np.exp(-np.log(theta) - d / theta + m.delay_log_shape(np.array(d), model)))
+
+    for d in (3.0, 12.0, 40.0, 100.0):
+        assert m.delay_cdf(np.array(d), model) == pytest.approx(integrate.quad(density, 0.0, d)[0], abs=1e-12)
+        assert m.delay_cdf(np.array(d), model) == pytest.approx(np.mean(draws <= d), abs=0.005)
+    assert m.delay_cdf(np.array(-1.0), model) == 0.0
+    if shape == 1:
+        np.testing.assert_array_equal(draws, 24.0 * np.random.default_rng(5).standard_exponential(200_000))
 
 
 def test_predicted_arrival_by_hand():

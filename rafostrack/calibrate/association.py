@@ -9,13 +9,17 @@ smoother's nodes), with the calibrated timing:
 E-step: per window, the exact association marginals at x (`engines.exact`: P(signal j is
     beacon i's first arrival), P(... its echo), P(clutter); one engine call for all the
     windows with the same numbers of beacons and signals), the first arrival split into
-    direct and delayed by the error density's components, P(delayed | r) = eps EMG(r) / f(r)
+    direct and delayed by the error density's components, P(delayed | r) = eps f_d(r) / f(r)
     (`model.toa_logpdf`), r = T_j - mu_i; and the delay's posterior mean given it was
-    delayed, E[d | r] = m + sigma phi(m / sigma) / Phi(m / sigma), m = r - sigma^2 / tau
-    (a Gaussian error plus an Exp(mean tau) delay, truncated to d > 0).
-M-step: eps = E[#delayed] / E[#first arrivals]; tau = E[sum of delays] / E[#delayed], the
-    delays of multipath and of echoes alike (the model gives both the same Exp(tau); an
-    echo's delay is from its beacon's first arrival, at that arrival's expected time);
+    delayed. A Gamma(k, theta) delay d plus a Gaussian error: d | r has density
+    proportional to d^(k-1) phi((d - m) / sigma) on d > 0, m = r - sigma^2 / theta; with
+    u = m / sigma and G = phi(u) / Phi(u) (truncated-Gaussian moments),
+        k = 1: E[d | r] = sigma (u + G),
+        k = 2: E[d | r] = sigma (u^2 + 1 + u G) / (u + G).
+M-step: eps = E[#delayed] / E[#first arrivals]; tau = E[sum of delays] / E[#delayed] (the
+    maximum-likelihood mean of a Gamma delay of known shape), the delays of multipath and of
+    echoes alike (the model gives both the same law; an echo's delay is from its beacon's
+    first arrival, at that arrival's expected time);
     e = E[#echoes] / E[#first arrivals whose echo could have been stored], an echo of a
     first arrival at T_j being stored only before the horizon h: weight G(h - T_j);
     clutter rate from the clutter probabilities (`noise.fit_clutter_rate`).
@@ -45,11 +49,17 @@ ITERATIONS = 8
 MIN_FRACTION = 1e-3  # multipath and echo fractions are kept above this (never exactly off)
 
 
-def _delay_mean(resid_s: NDArray, sigma: float, tau: float) -> NDArray:
-    """E[d | r] for r = g + d, g ~ N(0, sigma^2), d ~ Exp(mean tau) (module docstring)."""
-    mean = resid_s - sigma * sigma / tau
+def _delay_mean(resid_s: NDArray, sigma: float, tau: float, shape: int) -> NDArray:
+    """E[d | r] for r = g + d, g ~ N(0, sigma^2), d ~ Gamma(shape k, mean tau) (module
+    docstring); 0 where the ratio's floating point gives no number (r many sigma below the
+    prediction, where the posterior of being delayed is nil)."""
+    mean = resid_s - sigma * sigma * shape / tau
     z = mean / sigma
-    return mean + sigma * np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z))
+    hazard = np.exp(-0.5 * z * z - 0.5 * np.log(2 * np.pi) - log_ndtr(z))  # phi(z) / Phi(z)
+    if shape == 1:
+        return mean + sigma * hazard
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.nan_to_num(sigma * (z * z + 1.0 + z * hazard) / (z + hazard), nan=0.0, posinf=0.0, neginf=0.0)
 
 
 @dataclass(frozen=True)
@@ -107,7 +117,9 @@ def fit_association(
             p_delayed = 1.0 - direct_probability(resid, e_model)
             first += p_first.sum()
             delayed += float(np.sum(p_first * p_delayed))
-            delay = np.clip(_delay_mean(resid, sigma_e, fitted.multipath_delay_s), 0.0, None)
+            delay = np.clip(
+                _delay_mean(resid, sigma_e, fitted.multipath_delay_s, fitted.multipath_delay_shape), 0.0, None
+            )
             delay_sum += float(np.sum(p_first * p_delayed * delay))
             echoes += p_echo.sum()
             # An echo of beacon i at T_j is delayed from i's first arrival, taken at its
@@ -116,7 +128,7 @@ def fit_association(
             first_toa = np.einsum("nsk,nk->ns", p_first, b.toa_s) / np.where(heard > 0, heard, 1.0)
             echo_delay = np.clip(b.toa_s[:, None, :] - first_toa[:, :, None], 0.0, None)
             delay_sum += float(np.sum(p_echo * echo_delay))
-            stored = -np.expm1(-np.clip(h[:, None] - b.toa_s, 0.0, None) / fitted.multipath_delay_s)  # G(h - T_j)
+            stored = m.delay_cdf(h[:, None] - b.toa_s, fitted)  # G(h - T_j)
             echo_chances += float(np.sum(p_first * stored[:, None, :]))
             p_clutter.append(assoc.p_clutter.ravel())
         eps = float(np.clip(delayed / max(first, 1e-9), MIN_FRACTION, 0.5))

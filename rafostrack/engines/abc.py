@@ -4,8 +4,8 @@ A simulating engine (`base.SimulatingEngine`): it never evaluates the factors w_
 For each particle X it simulates S windows from the model (`simulate_windows`: one window
 of `rafostrack.simulate`'s generative model, vectorised: each beacon detected with
 probability Pd, arriving at mu + N(0, sigma^2) plus, with probability `multipath_fraction`,
-an Exp(`multipath_delay_s`) delay, and with probability `echo_fraction` a second arrival
-(an echo) an Exp(`multipath_delay_s`) later, labelled with the same beacon;
+a multipath delay (`model.multipath_delays`), and with probability `echo_fraction` a second
+arrival (an echo) another such delay later, labelled with the same beacon;
 Poisson(`clutter_rate`) clutter uniform on [0, W];
 signals outside [0, W] lost; the float stores the earliest r), and compares each with the
 stored TOAs T_1 < ... < T_K by a matching distance
@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 from scipy.special import logsumexp
 
 from ..config import Config, ModelConfig
+from ..model import multipath_delays
 from .base import Association, WindowPrediction
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
@@ -77,9 +78,9 @@ def simulate_windows(
     detected = rng.random(shape) < p_detect[:, None, :]
     toa = mu_s[:, None, :] + model.toa_sigma_s * rng.standard_normal(shape)
     delayed = rng.random(shape) < model.multipath_fraction
-    toa = toa + np.where(delayed, model.multipath_delay_s * rng.standard_exponential(shape), 0.0)
+    toa = toa + np.where(delayed, multipath_delays(rng, model, shape), 0.0)
     echoed = rng.random(shape) < model.echo_fraction
-    echo = toa + model.multipath_delay_s * rng.standard_exponential(shape)
+    echo = toa + multipath_delays(rng, model, shape)
     received = detected & (toa >= 0.0) & (toa <= window_s)
     echo_received = received & echoed & (echo <= window_s)
     n_clutter = rng.poisson(model.clutter_rate, n_sims)
