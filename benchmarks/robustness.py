@@ -84,7 +84,8 @@ def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFra
     labeller reaches when the track is known. It is not the Bayes rate exactly (the
     simulator's delays are lognormal, its noise heavy-tailed, its detection fades in bad
     propagation regimes; the model's are not), but clutter that lands within a few seconds of
-    a source's predicted arrival is as ambiguous here as for the tracker."""
+    a source's predicted arrival is as ambiguous here as for the tracker. The rest of the model
+    (e.g. the multipath delay law) is the run's configuration, `--config` layers included."""
     b, info, per = loaded.beacons, loaded.info, events["beacons"]
     ids = list(b.beacon_id)
     beacons = dataclasses.replace(
@@ -147,7 +148,9 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> dict[str, An
         TrackInputs(float_file, config_files=config_files, overrides=ref_overrides), out_root / "labelled", plots=False
     )
     track = ours.output.track
-    labelled = load_float(TrackInputs(float_file, overrides=TRUE_LABELS))  # the true labels
+    # the true labels, and the configuration the oracle starts from: the run's, so that a
+    # model being tried (`--config`) is tried by the oracle too
+    labelled = load_float(TrackInputs(float_file, config_files=config_files, overrides=TRUE_LABELS))
     err = position_errors_km(track, truth)
     ref_err = position_errors_km(ref.output.track, truth)
     status = track["status"].value_counts().to_dict() if "status" in track else {}
