@@ -23,7 +23,8 @@ with probability e (`echo_fraction`), after a delay of the multipath delay's law
 may then take a pair of signals j < j': in the matching, a direct arrival without a stored
 echo weighs w_ij (1 - e G(h - T_j)) (no echo, or one after the horizon), a pair
 w_ij (1 - e G(h - T_j)) E_jj' with E_jj' = e g(T_j' - T_j) / (Lambda (1 - e G(h - T_j))),
-g and G the delay's density and CDF (`echo_factors`). The echo factors depend on the signals only, not on the particle.
+g and G the delay's density and CDF (`echo_factors`). The echo factors depend on the
+signals only, not on the particle.
 
 Arrays are shaped (particles, beacons, signals) = (P, s, K).
 """

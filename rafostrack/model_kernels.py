@@ -81,6 +81,16 @@ def log_psi(u: float) -> float:  # pragma: no cover - compiled
     return -0.5 * u * u - _LOG_SQRT_2PI - 2.0 * math.log(-u) + math.log(series)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _log_add(a: float, b: float) -> float:  # pragma: no cover - compiled
+    """log(e^a + e^b)."""
+    top = max(a, b)
+    gap = abs(a - b)
+    if gap > _EXP_UNDERFLOW:  # exp(-gap) is 0.0: the sum below is `top`, bit for bit
+        return top
+    return top + math.log1p(math.exp(-gap))
+
+
 @njit(cache=True, nogil=True)
 def constants(sigma: float, eps: float, tau: float, shape: int):  # pragma: no cover - compiled
     """The density's constants, computed once per call of a kernel (theta = tau / shape):
@@ -112,11 +122,7 @@ def logpdf_c(r: float, c) -> float:  # pragma: no cover - compiled
         b = log_delayed - r * inv_theta + (log_ndtr(u) if u < 8.0 else 0.0)
     else:
         b = log_delayed - r * inv_theta + log_psi(u)
-    top = max(a, b)
-    gap = abs(a - b)
-    if gap > _EXP_UNDERFLOW:  # exp(-gap) is 0.0: the sum below is `top`, bit for bit
-        return top
-    return top + math.log1p(math.exp(-gap))
+    return _log_add(a, b)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -134,9 +140,7 @@ def cdf_c(r: float, c) -> float:  # pragma: no cover - compiled
     if shape == 1:
         tail = math.exp(half_shift2 - r * inv_theta + log_phi_u)
     else:
-        b = math.log(shift) + log_psi(u)
-        top = max(log_phi_u, b)
-        tail = math.exp(half_shift2 - r * inv_theta + top + math.log1p(math.exp(-abs(log_phi_u - b))))
+        tail = math.exp(half_shift2 - r * inv_theta + _log_add(log_phi_u, math.log(shift) + log_psi(u)))
     return (1.0 - eps) * gauss + eps * (gauss - tail)
 
 
