@@ -12,7 +12,7 @@ from scipy.special import expit
 
 from rafostrack.calibrate import CALIBRATED_KEYS, MIN_ARRIVALS, Calibration, calibrate
 from rafostrack.calibrate.detection import MIN_OPPORTUNITIES, fit_detection
-from rafostrack.config import load_config
+from rafostrack.config import load_config, with_overrides
 from rafostrack.estimates import Estimate
 from rafostrack.model import predicted_toa_s, window_beacons
 from rafostrack.scenarios import synthetic_scenario
@@ -95,6 +95,17 @@ def test_an_explicit_sound_speed_is_the_one_the_calibrated_pass_uses(first_pass)
     plain = window_beacons(dataclasses.replace(kept.beacons, sound_speed_m_s=None), kept.info, record.windows[5].time)
     ranges = np.full((1, len(wb.index)), 600e3)
     np.testing.assert_allclose(predicted_toa_s(ranges, wb, config.model), predicted_toa_s(ranges, plain, config.model))
+
+
+def test_the_clock_random_walk_is_not_fitted_below_its_floor(first_pass, calibrated):
+    """`[calibrate] min_clock_rate_sd_s_per_day` bounds the fitted clock wander from below:
+    a floor above the value fitted without one is where the fit stops."""
+    free = with_overrides(CONFIG, calibrate={"min_clock_rate_sd_s_per_day": 0.0})
+    q = calibrate(*first_pass, free).report["clock_rate_sd_s_per_day"]
+    floor = 3 * max(q, CONFIG.calibrate.min_clock_rate_sd_s_per_day)
+    held = calibrate(*first_pass, with_overrides(CONFIG, calibrate={"min_clock_rate_sd_s_per_day": floor}))
+    assert held.report["clock_rate_sd_s_per_day"] == pytest.approx(floor, abs=1e-5)
+    assert calibrated.report["clock_rate_sd_s_per_day"] >= CONFIG.calibrate.min_clock_rate_sd_s_per_day - 1e-5
 
 
 def _with_confident(estimate: Estimate, n: int) -> Estimate:

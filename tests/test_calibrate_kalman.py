@@ -382,6 +382,22 @@ def test_fit_hyper_maximises_dense_evidence_plus_hyperprior():
     assert abs(best.toa_sigma_s - 1.5) < 0.8  # the simulated noise sd is 1.5 s (+ offsets taken up by a_i)
 
 
+def test_fit_hyper_holds_the_clock_rate_sd_at_its_floor():
+    """A floor on q above the free optimum's holds q at the floor (the evidence falls away
+    from the optimum) and refits the others; a floor below it changes nothing."""
+    problem, _ = _small_problem(seed=6, end_fix=True, n_nodes=12, n_heard=4)
+    lin = kalman.linearise(problem, np.zeros(problem.n_unknowns), np.ones(len(problem.toa_s)), kalman.KalmanPriors())
+    start = kalman.Hyper(8.0, 3.0, 4.0, 0.01)
+    free = kalman.fit_hyper(lin, start)
+    q = free.clock_rate_sd_s_per_day
+    assert kalman.Hyper.LOWER[3] < q < kalman.Hyper.UPPER[3] / 10
+    held = kalman.fit_hyper(lin, start, kalman.Hyper.lower_with_clock_floor(5 * q))
+    assert held.clock_rate_sd_s_per_day == pytest.approx(5 * q)
+    assert kalman.evidence_and_gradient(lin, held)[0] < kalman.evidence_and_gradient(lin, free)[0]
+    below = kalman.fit_hyper(lin, start, kalman.Hyper.lower_with_clock_floor(q / 5))
+    assert dataclasses.astuple(below) == pytest.approx(dataclasses.astuple(free), rel=1e-6)
+
+
 # ---------------------------------------------------------------------------------------
 # A simulated float with known timing nuisances.
 

@@ -294,7 +294,8 @@ def calibrate(
         if speeds_fitted
         else kalman.KalmanPriors(sound_speed_m_s=1e-3, beacon_sound_speed_m_s=1e-3)
     )
-    fit = kalman.fit(problem, start, weight_of, mid, priors=priors)
+    lower = kalman.Hyper.lower_with_clock_floor(config.calibrate.min_clock_rate_sd_s_per_day)
+    fit = kalman.fit(problem, start, weight_of, mid, priors=priors, hyper_lower=lower)
     left_out: dict[str, int] = {}
     # A sound speed the user set does not move: no source can hinge it.
     hinging = _hinging_sources(problem, fit, priors) if speeds_fitted else np.zeros(problem.n_heard, dtype=bool)
@@ -303,7 +304,7 @@ def calibrate(
         left_out = {str(beacons.beacon_id[heard[h]]): int(counts[h]) for h in np.flatnonzero(hinging)}
         problem, mid = _without_sources(problem, mid, hinging)
         heard = heard[~hinging]
-        fit = kalman.fit(problem, fit.hyper, weight_of, mid, priors=priors)
+        fit = kalman.fit(problem, fit.hyper, weight_of, mid, priors=priors, hyper_lower=lower)
     hyper = fit.hyper
     values: dict[tuple[str, str], float] = {
         ("model", "sound_speed_m_s"): round(fit.sound_speed_m_s, 2),

@@ -99,8 +99,13 @@ class Hyper:
         return np.log(dataclasses.astuple(self))
 
     @classmethod
-    def from_vector(cls, x: NDArray) -> Hyper:
-        return cls(*np.clip(np.exp(x), cls.LOWER, cls.UPPER).tolist())
+    def from_vector(cls, x: NDArray, lower: tuple[float, ...] = LOWER) -> Hyper:
+        return cls(*np.clip(np.exp(x), lower, cls.UPPER).tolist())
+
+    @classmethod
+    def lower_with_clock_floor(cls, clock_rate_sd_s_per_day: float) -> tuple[float, ...]:
+        """`LOWER` with the clock's q held at or above `clock_rate_sd_s_per_day`."""
+        return (*cls.LOWER[:3], max(cls.LOWER[3], clock_rate_sd_s_per_day))
 
 
 HYPER_FIELDS = tuple(f.name for f in dataclasses.fields(Hyper))
@@ -517,26 +522,26 @@ def log_hyperprior(hyper: Hyper) -> tuple[float, NDArray[np.float64]]:
     return float(-0.5 * np.sum(z * z)), -z / log_sd
 
 
-def fit_hyper(lin: Linearised, hyper: Hyper) -> Hyper:
+def fit_hyper(lin: Linearised, hyper: Hyper, lower: tuple[float, ...] = Hyper.LOWER) -> Hyper:
     """Hyperparameters maximising the marginal likelihood of the model linearised at `lin`,
     times their prior (`log_hyperprior`): quasi-Newton in log space with the gradient of
-    `evidence_and_gradient`, within `Hyper`'s bounds."""
+    `evidence_and_gradient`, within `lower` and `Hyper.UPPER`."""
 
     def cost(x: NDArray) -> tuple[float, NDArray]:
-        h = Hyper.from_vector(x)
+        h = Hyper.from_vector(x, lower)
         log_ml, grad = evidence_and_gradient(lin, h)
         log_prior, prior_grad = log_hyperprior(h)
         return -log_ml - log_prior, -grad - prior_grad
 
-    bounds = list(zip(np.log(Hyper.LOWER), np.log(Hyper.UPPER), strict=True))
-    start = np.clip(hyper.vector(), *np.log([Hyper.LOWER, Hyper.UPPER]))
+    bounds = list(zip(np.log(lower), np.log(Hyper.UPPER), strict=True))
+    start = np.clip(hyper.vector(), *np.log([lower, Hyper.UPPER]))
     # The search stops when the log evidence (~10^3 nats) changes by less than ~1e-4 nats
     # (ftol) or its gradient is below 0.1 nats per unit of log hyperparameter (gtol: a 10%
     # change of any hyperparameter then gains at most ~0.01 nats); hyperparameters closer to
     # the optimum than that make no difference.
     options = {"ftol": 1e-7, "gtol": 0.1, "maxiter": 50}
     best = minimize(cost, start, jac=True, method="L-BFGS-B", bounds=bounds, options=options)
-    return Hyper.from_vector(best.x)
+    return Hyper.from_vector(best.x, lower)
 
 
 def position_covariances(lin: Linearised, hyper: Hyper) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -610,15 +615,17 @@ def fit(
     *,
     priors: KalmanPriors = KalmanPriors(),
     iterations: int = 4,
+    hyper_lower: tuple[float, ...] = Hyper.LOWER,
 ) -> KalmanFit:
-    """Gauss-Newton with the hyperparameters refitted at each linearisation, and the
-    arrivals' weights from their residuals by `weight_of(residual_s, toa_sigma_s)` (EM for
-    multipath); `mid_days` (H,) the drift reference of each heard beacon."""
+    """Gauss-Newton with the hyperparameters refitted at each linearisation (within
+    `hyper_lower` and `Hyper.UPPER`), and the arrivals' weights from their residuals by
+    `weight_of(residual_s, toa_sigma_s)` (EM for multipath); `mid_days` (H,) the drift
+    reference of each heard beacon."""
     u = np.zeros(problem.n_unknowns)
     weight = np.ones(len(problem.toa_s))
     for _ in range(iterations):
         lin = linearise(problem, u, weight, priors)
-        hyper = fit_hyper(lin, hyper)
+        hyper = fit_hyper(lin, hyper, hyper_lower)
         u = u + solve_step(lin, hyper)[0]
         weight = weight_of(linearise(problem, u, weight, priors).toa_residual_s, hyper.toa_sigma_s)
     lin = linearise(problem, u, weight, priors)
