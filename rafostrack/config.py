@@ -113,7 +113,9 @@ class CalibrateConfig:
     first_pass_toa_sigma_s: float = setting("> 0", _positive)
     iterations: int = setting("between 1 and 5", lambda v: 1 <= v <= 5)
     max_particles: int = setting("between 2 and 10000000", lambda v: 2 <= v <= 10_000_000)
-    min_clock_rate_sd_s_per_day: float = setting(">= 0", _non_negative)
+    min_clock_rate_sd_s_per_day: float = setting(
+        "between 0 and 0.3 (the search's upper bound)", lambda v: 0 <= v <= 0.3
+    )
 
 
 @dataclass(frozen=True)
