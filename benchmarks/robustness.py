@@ -10,7 +10,11 @@ directories, and tracks every float as a user would, from the files
 float: RMSE, p95 and max error (km), labels right, the labels an oracle gets at the true
 track with the true nuisances (`oracle_labels`: how ambiguous the float's arrivals are), 95%-
 ellipse coverage, the status counts, the median ESS, the true-label filter's RMSE, p95 and the
-ratio, the run time; then the issue's targets, PASS or FAIL, with the floats failing each.
+ratio, the run time, and the confidently wrong answers: windows more than 30 km off with an
+sd_km under half the error (`confident_wrong`), labels given with probability >= 0.99 that
+are wrong (`wrong_p99`) beside the number such probabilities predict (`expected_p99`); then
+the issue's targets, PASS or FAIL, with the floats failing each, and the reliability of the
+label probabilities over all floats (`evaluate.label_reliability`).
 
     python benchmarks/robustness.py [--floats 24] [--days 240] [--seed 2026] [--workers 2]
                                     [--out DIR] [--config FILE] [--only ID ...] [--csv FILE]
@@ -39,7 +43,13 @@ import pandas as pd
 
 from rafostrack.config import with_overrides
 from rafostrack.domain import Particles
-from rafostrack.evaluate import inside_ellipse, position_errors_km
+from rafostrack.evaluate import (
+    confidently_wrong,
+    inside_ellipse,
+    label_reliability,
+    label_scores,
+    position_errors_km,
+)
 from rafostrack.geodesy import local_offsets_km
 from rafostrack.likelihoods import arrivals_from_config
 from rafostrack.pipeline import LoadedFloat, TrackInputs, load_float, track_float
@@ -50,6 +60,7 @@ from rafostrack.workers import single_threaded_math
 CLUTTER_RATES = (1.0, 2.0, 3.0)
 GEOMETRIES = ("dimes", "weddell")
 TRUE_LABELS = {"filter": {"likelihood": "labeled"}}  # the reference filter's one difference
+CONFIDENT_PROB = 0.99  # a label given with at least this probability is a confident one
 
 
 def make_missions(root: Path, n_floats: int, days: int, seed: int) -> list[Path]:
@@ -68,13 +79,6 @@ def make_missions(root: Path, n_floats: int, days: int, seed: int) -> list[Path]
         write_stress_mission(mission, outdir)
         files += [outdir / f"{f.info.float_id}.csv" for f in mission.floats]
     return files
-
-
-def _labels_right(labels: pd.DataFrame, loaded: LoadedFloat) -> float:
-    """The fraction of `labels` equal to the true labels of `loaded` (the float read with them)."""
-    truth = [b for w in loaded.record.windows for b in (w.beacon_id or (None,) * w.n_signals)]
-    est = [b if isinstance(b, str) else None for b in labels["beacon_id"]]
-    return float(np.mean([a == b for a, b in zip(est, truth, strict=True)])) if truth else float("nan")
 
 
 def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFrame) -> float:
@@ -124,9 +128,10 @@ def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFra
     return right / total if total else float("nan")
 
 
-def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> dict[str, Any]:
+def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> tuple[dict[str, Any], pd.DataFrame]:
     """Track one float by default and with its true labels (with the filter seed, when
-    given); score both against the truth."""
+    given); score both against the truth. Returns the float's row and its labels' scores
+    (`evaluate.label_scores`)."""
     float_file, out_root, config_files, seed = task
     seeded: dict[str, Any] = {}
     if seed is not None:
@@ -154,6 +159,8 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> dict[str, An
     err = position_errors_km(track, truth)
     ref_err = position_errors_km(ref.output.track, truth)
     status = track["status"].value_counts().to_dict() if "status" in track else {}
+    labels = label_scores(ours.output.labels, labelled.record)
+    confident = labels[labels["prob"] >= CONFIDENT_PROB]
     row = {
         "float": float_file.stem,
         "filter_seed": seed,
@@ -162,20 +169,24 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> dict[str, An
         "rmse_km": float(np.sqrt(np.mean(err**2))),
         "p95_km": float(np.percentile(err, 95)),
         "max_km": float(err.max()),
-        "labels": _labels_right(ours.output.labels, labelled),
+        "labels": float(labels["right"].mean()),
         "labels_oracle": oracle_labels(labelled, events, truth),
         "cover95": float(np.mean(inside_ellipse(track, truth, ELLIPSE_95_SCALE))),
         "ess_med": float(np.median(ours.output.filter_ess)),
         "ref_rmse_km": float(np.sqrt(np.mean(ref_err**2))),
         "ref_p95_km": float(np.percentile(ref_err, 95)),
         "seconds": seconds,
+        "windows": len(track),
+        "confident_wrong": int(confidently_wrong(err, track["sd_km"].to_numpy()).sum()),
+        "wrong_p99": int((~confident["right"]).sum()),
+        "expected_p99": float((1.0 - confident["prob"]).sum()),
         **{f"n_{k}": int(v) for k, v in status.items()},
         "n_ambiguous": int(track["ambiguous"].sum()),
     }
     row["ratio"] = row["rmse_km"] / row["ref_rmse_km"]
     errors = pd.DataFrame({"time": track["time"], "error_km": err, "sd_km": track["sd_km"]})
     errors.to_csv(out_root / f"errors_{float_file.stem}.csv", index=False)
-    return row
+    return row, labels.assign(float=float_file.stem, filter_seed=seed)
 
 
 def seed_spread(out_root: Path, seeds: list[int], floats: list[str]) -> pd.DataFrame:
@@ -237,15 +248,17 @@ def main() -> None:
     started = time.perf_counter()
     if args.workers > 1:
         with single_threaded_math(), ProcessPoolExecutor(args.workers) as pool:
-            rows = list(pool.map(score, tasks))
+            scored = list(pool.map(score, tasks))
     else:
-        rows = [score(t) for t in tasks]
-    table = pd.DataFrame(rows)
+        scored = [score(t) for t in tasks]
+    table = pd.DataFrame([row for row, _ in scored])
+    labels = pd.concat([scores for _, scores in scored], ignore_index=True)
     counts = sorted(c for c in table.columns if c.startswith("n_"))
     table[counts] = table[counts].fillna(0).astype(int)  # a status no window of a float had
     pd.set_option("display.width", 200)
     cols = ["float", "geometry", "clutter", "rmse_km", "p95_km", "max_km", "labels", "labels_oracle", "cover95",
-            "ess_med", "ref_rmse_km", "ref_p95_km", "ratio", "seconds", *counts]  # fmt: skip
+            "ess_med", "ref_rmse_km", "ref_p95_km", "ratio", "seconds", *counts, "confident_wrong", "wrong_p99",
+            "expected_p99"]  # fmt: skip
     failing_with: list[list[tuple[str, list[str]]]] = []
     for seed in seeds:
         runs = table[table["filter_seed"].isna()] if seed is None else table[table["filter_seed"] == seed]
@@ -260,6 +273,19 @@ def main() -> None:
             )
         over = runs.loc[runs["ref_p95_km"] > 15, "float"]
         print(f"true-label filter with p95 > 15 km: {len(over)}" + (f" ({', '.join(over)})" if len(over) else ""))
+        wrong = runs.loc[runs["confident_wrong"] > 0, ["float", "confident_wrong"]]
+        print(
+            f"confidently wrong windows (> 30 km off, sd_km under half the error): {wrong['confident_wrong'].sum()}"
+            f" of {runs['windows'].sum()}"
+            + (f" ({', '.join(f'{f} {n}' for f, n in wrong.itertuples(index=False))})" if len(wrong) else "")
+        )
+        print(
+            f"labels given with p >= {CONFIDENT_PROB}: {runs['wrong_p99'].sum()} wrong, "
+            f"{runs['expected_p99'].sum():.1f} expected"
+        )
+        mine = labels[labels["filter_seed"].isna()] if seed is None else labels[labels["filter_seed"] == seed]
+        print("label reliability, all floats (a calibrated labeller: right = mean_prob in every bin):")
+        print(label_reliability(mine).to_string(index=False, float_format=lambda x: f"{x:.4f}"))
     if len(seeds) > 1:
         print(f"\nfailing with every seed ({', '.join(map(str, seeds))}):")
         for k, (name, _) in enumerate(failing_with[0]):

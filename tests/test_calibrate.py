@@ -194,3 +194,25 @@ def test_fit_detection_is_the_maximum_likelihood_and_recovers_the_truth(p, r50):
     few = MIN_OPPORTUNITIES - 1
     assert fit_detection(ranges[:few], heard[:few], falloff, 0.9, 0.0) is None
     assert fit_detection(ranges[: few + 1], heard[: few + 1], falloff, 0.9, 0.0) is not None
+
+
+def test_the_report_gives_the_detection_of_every_beacon_fitted_heard_or_not(first_pass):
+    """A beacon whose arrivals the first pass all called clutter is not in the timing fit
+    (no offset correction reported) but has a detection fit; run.json reports it, as the
+    calibrated beacon table has it."""
+    estimate, record, beacons, info = first_pass
+    silenced = estimate.labels["beacon_id"].value_counts().index[0]  # the most heard: many opportunities
+    labels = estimate.labels.assign(
+        beacon_id=estimate.labels["beacon_id"].where(estimate.labels["beacon_id"] != silenced)
+    )
+    fitted = calibrate(dataclasses.replace(estimate, labels=labels), record, beacons, info, CONFIG)
+    assert fitted is not None
+    report = fitted.report["beacons"]
+    assert "offset_correction_s" not in report[silenced] and "p_detect" in report[silenced]
+    ids = list(fitted.beacons.beacon_id)
+    detected = [name for name in ids if np.isfinite(fitted.beacons.p_detect[ids.index(name)])]
+    assert silenced in detected and sorted(name for name in report if "p_detect" in report[name]) == sorted(detected)
+    for name in detected:
+        row = ids.index(name)
+        assert report[name]["p_detect"] == round(float(fitted.beacons.p_detect[row]), 3)
+        assert report[name]["detection_range_km"] == round(float(fitted.beacons.detection_range_km[row]), 1)

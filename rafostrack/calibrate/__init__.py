@@ -338,6 +338,18 @@ def calibrate(
     values = {k: v for k, v in values.items() if k not in explicit}
     ids = [str(b) for b in beacons.beacon_id]
     direct = fit.weight > 0.5
+    # Timing corrections of the beacons in the timing fit; detection of every beacon fitted,
+    # heard or not (a source fitted as never heard is one a user will want to see).
+    beacon_report: dict[str, dict[str, float]] = {
+        ids[i]: {
+            "offset_correction_s": round(float(fit.offset_s[h]), 3),
+            "drift_correction_s_per_day": round(float(fit.drift_s_per_day[h]), 5),
+            "sound_speed_m_s": round(float(fit.beacon_sound_speed_m_s[h]), 2),
+        }
+        for h, i in enumerate(heard)
+    }
+    for name, detection in detection_report.items():
+        beacon_report.setdefault(name, {}).update(detection)
     report = {
         "arrivals_used": len(problem.toa_s),
         "sources_left_out": left_out,  # source: its confident arrivals (`_hinging_sources`)
@@ -348,15 +360,7 @@ def calibrate(
         "log_evidence": round(fit.log_evidence, 2),
         "values": {f"[{s}] {k}": v for (s, k), v in values.items()},
         "kept_as_configured": sorted(f"[{s}] {k}" for s, k in explicit if (s, k) in CALIBRATED_KEYS),
-        "beacons": {
-            ids[i]: {
-                "offset_correction_s": round(float(fit.offset_s[h]), 3),
-                "drift_correction_s_per_day": round(float(fit.drift_s_per_day[h]), 5),
-                "sound_speed_m_s": round(float(fit.beacon_sound_speed_m_s[h]), 2),
-                **detection_report.get(ids[i], {}),
-            }
-            for h, i in enumerate(heard)
-        },
+        "beacons": beacon_report,
         "clock_residual_s": {"max_abs": round(float(np.abs(fit.clock_s).max()), 3), "nodes": len(fit.clock_s)},
         "nuisance_sd_km": {
             "median": round(float(np.median(np.sqrt(np.trace(fit.nuisance_cov_km2, axis1=1, axis2=2)))), 3)

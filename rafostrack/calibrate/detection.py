@@ -1,12 +1,12 @@
 """Detection per beacon, estimated from a first pass: how often a beacon was heard, by range.
 
 For each window and each active beacon whose predicted arrival falls well inside what the
-window could store (before the horizon, by 3 sd), the beacon was heard or not (its
-signal's label probability, summed over the window's TOAs: a soft count). The model's
-detection probability p / (1 + exp((range - R) / w)) (`model.detection_prob`, w the
-configured fall-off width) is fitted per beacon by maximum likelihood of those soft
-Bernoulli outcomes, p in [0.05, 0.995], R in [50, 5000] km. A beacon with too few
-opportunities keeps the configured values.
+window could store (before the horizon, by 3 sd), the beacon was heard or not (a signal
+of the window carries its label with probability >= 0.5). The model's detection
+probability p / (1 + exp((range - R) / w)) (`model.detection_prob`, w the configured
+fall-off width) is fitted per beacon by maximum likelihood of those Bernoulli outcomes,
+p in [0.05, 0.995], R in [50, 5000] km. A beacon with too few opportunities keeps the
+configured values.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ MIN_OPPORTUNITIES = 30
 def fit_detection(
     range_km: NDArray, heard: NDArray, falloff_km: float, p0: float, r0_km: float
 ) -> tuple[float, float] | None:
-    """(p, R) for one beacon from its opportunities (range, soft heard in [0, 1]), or None."""
+    """(p, R) for one beacon from its opportunities (range, heard in [0, 1]), or None."""
     if len(range_km) < MIN_OPPORTUNITIES:
         return None
     h = np.clip(heard, 0.0, 1.0)
