@@ -199,7 +199,9 @@ def test_fit_detection_is_the_maximum_likelihood_and_recovers_the_truth(p, r50):
 def test_the_report_gives_the_detection_of_every_beacon_fitted_heard_or_not(first_pass):
     """A beacon whose arrivals the first pass all called clutter is not in the timing fit
     (no offset correction reported) but has a detection fit; run.json reports it, as the
-    calibrated beacon table has it."""
+    calibrated beacon table has it, with its opportunities, and lists it as heard nowhere
+    (its fit at p's lower bound); the other beacons are heard. With detection set by the
+    user, no fit is used and none is reported."""
     estimate, record, beacons, info = first_pass
     silenced = estimate.labels["beacon_id"].value_counts().index[0]  # the most heard: many opportunities
     labels = estimate.labels.assign(
@@ -216,3 +218,12 @@ def test_the_report_gives_the_detection_of_every_beacon_fitted_heard_or_not(firs
         row = ids.index(name)
         assert report[name]["p_detect"] == round(float(fitted.beacons.p_detect[row]), 3)
         assert report[name]["detection_range_km"] == round(float(fitted.beacons.detection_range_km[row]), 1)
+    assert report[silenced]["detection_heard"] == 0
+    assert report[silenced]["detection_opportunities"] >= MIN_OPPORTUNITIES
+    assert fitted.report["sources_heard_nowhere"] == [silenced]
+    assert all(report[name]["detection_heard"] > 0 for name in detected if name != silenced)
+    explicit = {("model", "p_detect")}
+    kept = calibrate(dataclasses.replace(estimate, labels=labels), record, beacons, info, CONFIG, explicit=explicit)
+    assert kept is not None and kept.beacons.p_detect is None
+    assert kept.report["sources_heard_nowhere"] == []
+    assert not any("p_detect" in entry for entry in kept.report["beacons"].values())

@@ -37,7 +37,7 @@ from ..domain import ArrivalRecord, BeaconTable, FloatInfo, elapsed_days
 from ..estimates import Estimate
 from . import kalman
 from .association import fit_association
-from .detection import fit_detection
+from .detection import fit_detection, heard_nowhere
 from .noise import direct_probability, fit_multipath
 
 MIN_ARRIVALS = 60  # fewer confident arrivals than this: no calibration
@@ -213,7 +213,8 @@ def _detection(
     estimate: Estimate, record: ArrivalRecord, beacons: BeaconTable, info: FloatInfo, model: m.ModelConfig
 ) -> tuple[NDArray, NDArray, dict[str, Any]]:
     """Per-beacon (p_detect, half range km) fitted where there are enough opportunities (NaN
-    elsewhere), from the track's positions and its labels."""
+    elsewhere), from the track's positions and its labels; the report of each fit, with its
+    opportunities and the windows among them where the beacon was heard."""
     track = estimate.track
     at = pd.Index(track["time"]).get_indexer([w.time for w in record.windows])  # -1: not in the track
     track_lat, track_lon = track["lat"].to_numpy(), track["lon"].to_numpy()
@@ -245,7 +246,12 @@ def _detection(
         if fit is not None:
             p[i], r50[i] = fit
     report = {
-        str(beacons.beacon_id[i]): {"p_detect": round(float(p[i]), 3), "detection_range_km": round(float(r50[i]), 1)}
+        str(beacons.beacon_id[i]): {
+            "p_detect": round(float(p[i]), 3),
+            "detection_range_km": round(float(r50[i]), 1),
+            "detection_opportunities": len(heard[i]),
+            "detection_heard": int(sum(heard[i])),
+        }
         for i in range(len(beacons))
         if np.isfinite(p[i])
     }
@@ -323,8 +329,12 @@ def calibrate(
     timed = _with_values(config, values, explicit).model
     p, r50, detection_report = _detection(estimate, record, corrected, clocked, timed)
     detection_set = explicit & {("model", "p_detect"), ("model", "detection_range_km")}
+    nowhere: list[str] = []
     if beacons.p_detect is None and beacons.detection_range_km is None and not detection_set:
         corrected = dataclasses.replace(corrected, p_detect=p, detection_range_km=r50)
+        nowhere = [str(beacons.beacon_id[i]) for i in np.flatnonzero(np.isfinite(p)) if heard_nowhere(p[i])]
+    else:  # detection as configured (or as the beacon table gives it): no fit to report
+        detection_report = {}
     lat, lon = _track_at(record, problem.time, fit.lat, fit.lon)
     position_sd = float(np.median(np.sqrt(0.5 * np.trace(fit.position_cov_km2, axis1=1, axis2=2))))
     start_noise = dataclasses.replace(timed, multipath_fraction=max(noise["model"].multipath_fraction, 0.02))
@@ -338,8 +348,8 @@ def calibrate(
     values = {k: v for k, v in values.items() if k not in explicit}
     ids = [str(b) for b in beacons.beacon_id]
     direct = fit.weight > 0.5
-    # Timing corrections of the beacons in the timing fit; detection of every beacon fitted,
-    # heard or not (a source fitted as never heard is one a user will want to see).
+    # Timing corrections of the beacons in the timing fit; the detection of every beacon whose
+    # fit is used, heard or not (a source fitted as heard nowhere is one a user will want to see).
     beacon_report: dict[str, dict[str, float]] = {
         ids[i]: {
             "offset_correction_s": round(float(fit.offset_s[h]), 3),
@@ -353,6 +363,7 @@ def calibrate(
     report = {
         "arrivals_used": len(problem.toa_s),
         "sources_left_out": left_out,  # source: its confident arrivals (`_hinging_sources`)
+        "sources_heard_nowhere": nowhere,  # detection fitted at p's lower bound (`detection.heard_nowhere`)
         "windows_used": int(np.unique(problem.node).size),
         "residual_rms_s": round(float(np.sqrt(np.mean(fit.toa_residual_s[direct] ** 2))), 3),
         "clock_rate_sd_s_per_day": round(hyper.clock_rate_sd_s_per_day, 5),

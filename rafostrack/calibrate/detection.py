@@ -17,6 +17,15 @@ from scipy.optimize import minimize
 from scipy.special import expit, logit
 
 MIN_OPPORTUNITIES = 30
+P_BOUNDS = (0.05, 0.995)
+RANGE_BOUNDS_KM = (50.0, 5000.0)
+
+
+def heard_nowhere(p_detect: float) -> bool:
+    """Whether a fitted peak probability is at its lower bound: the fit's way of saying the
+    beacon is heard nowhere (e.g. no arrival carried its label), so that the tracker will
+    call its arrivals clutter."""
+    return p_detect <= P_BOUNDS[0]
 
 
 def fit_detection(
@@ -28,7 +37,7 @@ def fit_detection(
     h = np.clip(heard, 0.0, 1.0)
 
     def unpack(q: NDArray) -> tuple[float, float]:
-        return float(np.clip(expit(q[0]), 0.05, 0.995)), float(np.clip(np.exp(q[1]), 50.0, 5000.0))
+        return float(np.clip(expit(q[0]), *P_BOUNDS)), float(np.clip(np.exp(q[1]), *RANGE_BOUNDS_KM))
 
     def cost(q: NDArray) -> float:
         p, r50 = unpack(q)
