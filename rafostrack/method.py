@@ -107,34 +107,12 @@ def track_record(
     report = {**calibration.report, "passes": passes}
     return dataclasses.replace(
         out,
-        warnings=[*out.warnings, *heard_nowhere_warnings(info.float_id, report)],
         calibration=report,
         filter_s=spent["filter_s"] + out.filter_s,
         smoother_s=spent["smoother_s"] + out.smoother_s,
         calibrate_s=spent["calibrate_s"],
         model_inputs=(calibration.beacons, calibration.info, calibration.apply(config)),
     )
-
-
-def heard_nowhere_warnings(float_id: str, report: dict) -> list[str]:
-    """A warning naming the sources the last calibration fitted as heard nowhere
-    (`calibrate.detection.heard_nowhere`): the tracker calls their arrivals clutter, with
-    confidence, so that a working source whose few arrivals a pass called clutter stays
-    unheard. An analyst checks them (on the stress floats such labels are the most
-    overconfident: README, Robustness)."""
-    names = report.get("sources_heard_nowhere", [])
-    if not names:
-        return []
-    beacons = report.get("beacons", {})
-    detail = "; ".join(
-        f"{name}, heard in {beacons.get(name, {}).get('detection_heard', 0)} of "
-        f"{beacons.get(name, {}).get('detection_opportunities', 0)} windows where its signal was due"
-        for name in names
-    )
-    return [
-        f"{float_id}: calibration fitted {len(names)} source(s) as heard nowhere, so their arrivals are labelled "
-        f"clutter (check them by hand if the sources were working): {detail}"
-    ]
 
 
 def _feeding_calibration(tracker: Tracker) -> Tracker:

@@ -13,7 +13,7 @@ from rafostrack.engines import ENGINES
 from rafostrack.estimates import build_estimate
 from rafostrack.evaluate import association_accuracy, position_errors_km
 from rafostrack.likelihoods import ARRIVAL_LIKELIHOODS
-from rafostrack.method import heard_nowhere_warnings, track_record
+from rafostrack.method import track_record
 from rafostrack.motion import MOTION_MODELS
 from rafostrack.resampling import RESAMPLERS
 from rafostrack.smoother import MAX_COLUMNS, smooth
@@ -144,15 +144,3 @@ def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_
     np.testing.assert_allclose(out.track[cols].to_numpy(), whole.track[cols].to_numpy(), rtol=1e-12, atol=1e-12)
     assert out.labels["beacon_id"].equals(whole.labels["beacon_id"])
     np.testing.assert_allclose(out.labels["prob"], whole.labels["prob"], atol=1e-9)
-
-
-def test_a_source_fitted_as_heard_nowhere_is_named_in_a_warning():
-    report = {
-        "sources_heard_nowhere": ["W4b"],
-        "beacons": {"W4b": {"p_detect": 0.05, "detection_heard": 0, "detection_opportunities": 85}},
-    }
-    (warning,) = heard_nowhere_warnings("w1f02", report)
-    assert warning.startswith("w1f02: calibration fitted 1 source(s) as heard nowhere")
-    assert "W4b, heard in 0 of 85 windows where its signal was due" in warning
-    assert heard_nowhere_warnings("w1f02", {"sources_heard_nowhere": []}) == []
-    assert heard_nowhere_warnings("w1f02", {}) == []

@@ -23,8 +23,9 @@ RANGE_BOUNDS_KM = (50.0, 5000.0)
 
 def heard_nowhere(p_detect: float) -> bool:
     """Whether a fitted peak probability is at its lower bound: the fit's way of saying the
-    beacon is heard nowhere (e.g. no arrival carried its label), so that the tracker will
-    call its arrivals clutter."""
+    beacon is heard nowhere (no arrival, or only a few, carried its label), so that the
+    tracker will call its arrivals clutter: right for a source out of range, wrong for one
+    whose few arrivals a pass called clutter (README, Robustness)."""
     return p_detect <= P_BOUNDS[0]
 
 
