@@ -186,7 +186,12 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> tuple[dict[s
     row["ratio"] = row["rmse_km"] / row["ref_rmse_km"]
     errors = pd.DataFrame({"time": track["time"], "error_km": err, "sd_km": track["sd_km"]})
     errors.to_csv(out_root / f"errors_{float_file.stem}.csv", index=False)
-    return row, labels.assign(float=float_file.stem, filter_seed=seed)
+    return row, labels.assign(filter_seed=seed)
+
+
+def _of_seed(frame: pd.DataFrame, seed: int | None) -> pd.DataFrame:
+    """The rows of `frame` from the runs with `[filter] seed` = `seed` (None: the configured seed)."""
+    return frame[frame["filter_seed"].isna()] if seed is None else frame[frame["filter_seed"] == seed]
 
 
 def seed_spread(out_root: Path, seeds: list[int], floats: list[str]) -> pd.DataFrame:
@@ -261,7 +266,7 @@ def main() -> None:
             "expected_p99"]  # fmt: skip
     failing_with: list[list[tuple[str, list[str]]]] = []
     for seed in seeds:
-        runs = table[table["filter_seed"].isna()] if seed is None else table[table["filter_seed"] == seed]
+        runs = _of_seed(table, seed)
         if seed is not None:
             print(f"\n[filter] seed = {seed}")
         print(runs[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
@@ -283,7 +288,7 @@ def main() -> None:
             f"labels given with p >= {CONFIDENT_PROB}: {runs['wrong_p99'].sum()} wrong, "
             f"{runs['expected_p99'].sum():.1f} expected"
         )
-        mine = labels[labels["filter_seed"].isna()] if seed is None else labels[labels["filter_seed"] == seed]
+        mine = _of_seed(labels, seed)
         print("label reliability, all floats (a calibrated labeller: right = mean_prob in every bin):")
         print(label_reliability(mine).to_string(index=False, float_format=lambda x: f"{x:.4f}"))
     if len(seeds) > 1:

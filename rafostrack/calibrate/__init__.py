@@ -327,14 +327,14 @@ def calibrate(
     corrected = _corrected_beacons(beacons, heard, fit, speeds_fitted)
     clocked = dataclasses.replace(info, clock_residual=(problem.time, fit.clock_s))
     timed = _with_values(config, values, explicit).model
-    p, r50, detection_report = _detection(estimate, record, corrected, clocked, timed)
+    # Detection per beacon is fitted unless the user or the beacon table sets it.
     detection_set = explicit & {("model", "p_detect"), ("model", "detection_range_km")}
+    detection_report: dict[str, Any] = {}
     nowhere: list[str] = []
     if beacons.p_detect is None and beacons.detection_range_km is None and not detection_set:
+        p, r50, detection_report = _detection(estimate, record, corrected, clocked, timed)
         corrected = dataclasses.replace(corrected, p_detect=p, detection_range_km=r50)
         nowhere = [str(beacons.beacon_id[i]) for i in np.flatnonzero(np.isfinite(p)) if heard_nowhere(p[i])]
-    else:  # detection as configured (or as the beacon table gives it): no fit to report
-        detection_report = {}
     lat, lon = _track_at(record, problem.time, fit.lat, fit.lon)
     position_sd = float(np.median(np.sqrt(0.5 * np.trace(fit.position_cov_km2, axis1=1, axis2=2))))
     start_noise = dataclasses.replace(timed, multipath_fraction=max(noise["model"].multipath_fraction, 0.02))
