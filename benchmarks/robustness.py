@@ -9,12 +9,16 @@ directories, and tracks every float as a user would, from the files
 (`--likelihood labeled`, the reference a hand-labelling analyst would reach). Prints, per
 float: RMSE, p95 and max error (km), labels right, the labels an oracle gets at the true
 track with the true nuisances (`oracle_labels`: how ambiguous the float's arrivals are), 95%-
-ellipse coverage, the status counts, the median ESS, the true-label filter's RMSE, p95 and the
-ratio, the run time, and the confidently wrong answers: windows more than 30 km off with an
-sd_km under half the error (`confident_wrong`), labels given with probability >= 0.99 that
-are wrong (`wrong_p99`) beside the number such probabilities predict (`expected_p99`); then
-the issue's targets, PASS or FAIL, with the floats failing each, and the reliability of the
-label probabilities over all floats (`evaluate.label_reliability`).
+ellipse coverage, the status counts, the median ESS, the true-label filter's RMSE, p95, the
+ratio and its coverage, the run time, and the confidently wrong answers: windows more than
+30 km off with an sd_km under half the error (`confident_wrong`, and the true-label filter's),
+labels given with probability >= 0.99 that are wrong (`wrong_p99`) beside the number such
+probabilities predict (`expected_p99`); then the issue's targets, PASS or FAIL, with the
+floats failing each and those on which the target's reference fails it too (the true-label
+filter for p95 and coverage, the oracle for labels: what the data allow), and the
+reliability of the label probabilities over all floats (`evaluate.label_reliability`).
+The defaults were tuned on the missions of seed 2026; other `--seed`s are missions they have
+not seen.
 
     python benchmarks/robustness.py [--floats 24] [--days 240] [--seed 2026] [--workers 2]
                                     [--out DIR] [--config FILE] [--only ID ...] [--csv FILE]
@@ -61,6 +65,7 @@ CLUTTER_RATES = (1.0, 2.0, 3.0)
 GEOMETRIES = ("dimes", "weddell")
 TRUE_LABELS = {"filter": {"likelihood": "labeled"}}  # the reference filter's one difference
 CONFIDENT_PROB = 0.99  # a label given with at least this probability is a confident one
+COVERAGE_RANGE = (0.88, 0.99)  # the issue's target for the 95% ellipses' coverage of the truth
 
 
 def make_missions(root: Path, n_floats: int, days: int, seed: int) -> list[Path]:
@@ -121,9 +126,9 @@ def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFra
         probs, index = arrivals.label_probs(particle, np.ones(1), window)
         names = [*beacons.beacon_id[index], None]
         best = np.argmax(np.vstack([probs, 1.0 - probs.sum(axis=0, keepdims=True)]), axis=0)
-        right += sum(
-            names[k] == (t if isinstance(t, str) else None) for k, t in zip(best, window.beacon_id, strict=True)
-        )
+        true_ids = window.beacon_id
+        assert true_ids is not None  # the record was loaded with its true labels
+        right += sum(names[k] == (t if isinstance(t, str) else None) for k, t in zip(best, true_ids, strict=True))
         total += window.n_signals
     return right / total if total else float("nan")
 
@@ -156,8 +161,9 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> tuple[dict[s
     # the true labels, and the configuration the oracle starts from: the run's, so that a
     # model being tried (`--config`) is tried by the oracle too
     labelled = load_float(TrackInputs(float_file, config_files=config_files, overrides=TRUE_LABELS))
+    ref_track = ref.output.track
     err = position_errors_km(track, truth)
-    ref_err = position_errors_km(ref.output.track, truth)
+    ref_err = position_errors_km(ref_track, truth)
     status = track["status"].value_counts().to_dict() if "status" in track else {}
     labels = label_scores(ours.output.labels, labelled.record)
     confident = labels[labels["prob"] >= CONFIDENT_PROB]
@@ -175,9 +181,11 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> tuple[dict[s
         "ess_med": float(np.median(ours.output.filter_ess)),
         "ref_rmse_km": float(np.sqrt(np.mean(ref_err**2))),
         "ref_p95_km": float(np.percentile(ref_err, 95)),
+        "ref_cover95": float(np.mean(inside_ellipse(ref_track, truth, ELLIPSE_95_SCALE))),
         "seconds": seconds,
         "windows": len(track),
         "confident_wrong": int(confidently_wrong(err, track["sd_km"].to_numpy()).sum()),
+        "ref_confident_wrong": int(confidently_wrong(ref_err, ref_track["sd_km"].to_numpy()).sum()),
         "wrong_p99": int((~confident["right"]).sum()),
         "expected_p99": float((1.0 - confident["prob"]).sum()),
         **{f"n_{k}": int(v) for k, v in status.items()},
@@ -209,23 +217,39 @@ def seed_spread(out_root: Path, seeds: list[int], floats: list[str]) -> pd.DataF
     return pd.DataFrame.from_dict(rows, orient="index")
 
 
-def targets(table: pd.DataFrame) -> list[tuple[str, list[str]]]:
-    """The issue's targets and the floats failing each."""
+def targets(table: pd.DataFrame) -> list[tuple[str, list[str], list[str] | None]]:
+    """The issue's targets, the floats failing each, and the floats on which the target's
+    reference fails it too (None where the target is defined against the reference): the
+    true-label filter for the p95 and coverage targets, the oracle's labels for the labels'."""
     low_clutter = table["clutter"] <= 2
+
+    def floats(where: pd.Series) -> list[str]:
+        return list(table.loc[where, "float"])
+
+    def outside(cover: pd.Series) -> pd.Series:
+        return (cover < COVERAGE_RANGE[0]) | (cover > COVERAGE_RANGE[1])
+
     return [
-        ("no float lost: p95 <= 15 km", list(table.loc[table["p95_km"] > 15, "float"])),
+        ("no float lost: p95 <= 15 km", floats(table["p95_km"] > 15), floats(table["ref_p95_km"] > 15)),
         (
             "RMSE <= 5 km or <= 1.2x the true-label filter's",
-            list(table.loc[(table["rmse_km"] > 5) & (table["ratio"] > 1.2), "float"]),
+            floats((table["rmse_km"] > 5) & (table["ratio"] > 1.2)),
+            None,
         ),
-        ("labels right >= 97% at clutter <= 2", list(table.loc[low_clutter & (table["labels"] < 0.97), "float"])),
+        (
+            "labels right >= 97% at clutter <= 2",
+            floats(low_clutter & (table["labels"] < 0.97)),
+            floats(low_clutter & (table["labels_oracle"] < 0.97)),
+        ),
         (
             "labels right within 1 point of the oracle's (labels at the true track)",
-            list(table.loc[table["labels"] < table["labels_oracle"] - 0.01, "float"]),
+            floats(table["labels"] < table["labels_oracle"] - 0.01),
+            None,
         ),
         (
-            "95%-ellipse coverage in [88%, 99%]",
-            list(table.loc[(table["cover95"] < 0.88) | (table["cover95"] > 0.99), "float"]),
+            f"95%-ellipse coverage in [{COVERAGE_RANGE[0]:.0%}, {COVERAGE_RANGE[1]:.0%}]",
+            floats(outside(table["cover95"])),
+            floats(outside(table["ref_cover95"])),
         ),
     ]
 
@@ -262,27 +286,28 @@ def main() -> None:
     table[counts] = table[counts].fillna(0).astype(int)  # a status no window of a float had
     pd.set_option("display.width", 200)
     cols = ["float", "geometry", "clutter", "rmse_km", "p95_km", "max_km", "labels", "labels_oracle", "cover95",
-            "ess_med", "ref_rmse_km", "ref_p95_km", "ratio", "seconds", *counts, "confident_wrong", "wrong_p99",
-            "expected_p99"]  # fmt: skip
-    failing_with: list[list[tuple[str, list[str]]]] = []
+            "ess_med", "ref_rmse_km", "ref_p95_km", "ratio", "ref_cover95", "seconds", *counts, "confident_wrong",
+            "ref_confident_wrong", "wrong_p99", "expected_p99"]  # fmt: skip
+    failing_with: list[list[tuple[str, list[str], list[str] | None]]] = []
     for seed in seeds:
         runs = _of_seed(table, seed)
         if seed is not None:
             print(f"\n[filter] seed = {seed}")
         print(runs[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
         failing_with.append(targets(runs))
-        for name, failing in failing_with[-1]:
+        for name, failing, reference in failing_with[-1]:
             print(
                 f"{'PASS' if not failing else 'FAIL'}: {name}"
                 + (f" ({len(failing)}: {', '.join(failing)})" if failing else "")
+                + (f"; its reference fails it on {len(reference)}" if reference is not None else "")
+                + (f" ({', '.join(reference)})" if reference else "")
             )
-        over = runs.loc[runs["ref_p95_km"] > 15, "float"]
-        print(f"true-label filter with p95 > 15 km: {len(over)}" + (f" ({', '.join(over)})" if len(over) else ""))
         wrong = runs.loc[runs["confident_wrong"] > 0, ["float", "confident_wrong"]]
         print(
             f"confidently wrong windows (> 30 km off, sd_km under half the error): {wrong['confident_wrong'].sum()}"
             f" of {runs['windows'].sum()}"
             + (f" ({', '.join(f'{f} {n}' for f, n in wrong.itertuples(index=False))})" if len(wrong) else "")
+            + f"; the true-label filter's: {runs['ref_confident_wrong'].sum()}"
         )
         print(
             f"labels given with p >= {CONFIDENT_PROB}: {runs['wrong_p99'].sum()} wrong, "
@@ -293,7 +318,7 @@ def main() -> None:
         print(label_reliability(mine).to_string(index=False, float_format=lambda x: f"{x:.4f}"))
     if len(seeds) > 1:
         print(f"\nfailing with every seed ({', '.join(map(str, seeds))}):")
-        for k, (name, _) in enumerate(failing_with[0]):
+        for k, (name, _, _) in enumerate(failing_with[0]):
             always = sorted(set.intersection(*(set(per_seed[k][1]) for per_seed in failing_with)))
             print(f"  {name}: {len(always)}" + (f" ({', '.join(always)})" if always else ""))
         spread = seed_spread(root / "out", [int(k) for k in args.filter_seeds], [f.stem for f in files])
