@@ -5,8 +5,8 @@ window could store (before the horizon, by 3 sd), the beacon was heard or not (a
 of the window carries its label with probability >= 0.5). The model's detection
 probability p / (1 + exp((range - R) / w)) (`model.detection_prob`, w the configured
 fall-off width) is fitted per beacon by maximum likelihood of those Bernoulli outcomes,
-p in [0.05, 0.995], R in [50, 5000] km. A beacon with too few opportunities keeps the
-configured values.
+p within `P_BOUNDS` and R within `RANGE_BOUNDS_KM`. A beacon with too few opportunities
+keeps the configured values.
 """
 
 from __future__ import annotations
