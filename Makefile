@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 RUNTIME := $(VENV)/.installed-runtime
 
-.PHONY: demo test lint format bench sample clean
+.PHONY: demo test test-fast lint format bench sample clean
 
 $(RUNTIME): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,14 +25,19 @@ demo: $(RUNTIME)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
+# The suite without the tests marked slow (each over ~5 s): a quick check while editing.
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -m "not slow"
+
 lint: $(STAMP)
-	$(BIN)/ruff check rafostrack tests benchmarks scripts
-	$(BIN)/ruff format --check rafostrack tests benchmarks scripts
+	$(BIN)/ruff check rafostrack papers tests benchmarks scripts
+	$(BIN)/ruff format --check rafostrack papers tests benchmarks scripts
 	$(BIN)/mypy
+	$(BIN)/lint-imports
 
 format: $(STAMP)
-	$(BIN)/ruff format rafostrack tests benchmarks scripts
-	$(BIN)/ruff check --fix rafostrack tests benchmarks scripts
+	$(BIN)/ruff format rafostrack papers tests benchmarks scripts
+	$(BIN)/ruff check --fix rafostrack papers tests benchmarks scripts
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/accuracy.py
@@ -46,10 +51,10 @@ sample: $(STAMP)
 # The paper's figures redone (figures/REPORT.md): under 15 min on 2 cores; -quick under 3 min.
 .PHONY: figures figures-quick
 figures: $(STAMP)
-	$(BIN)/python -m rafostrack.experiments --out figures
+	$(BIN)/python -m papers --out figures
 
 figures-quick: $(STAMP)
-	$(BIN)/python -m rafostrack.experiments --quick --out figures
+	$(BIN)/python -m papers --quick --out figures
 
 clean:
 	rm -rf out $(VENV) build *.egg-info .pytest_cache .ruff_cache

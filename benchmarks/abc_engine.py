@@ -1,9 +1,9 @@
-"""The `abc` association engine against `exact` on stress-scenario floats (issue 13).
+"""The `abc` association engine against `exact` on stress-scenario floats.
 
-Simulates floats with `rafostrack.stress` (the independent generator of benchmarks/
+Simulates floats with `rafostrack.sim.stress` (the independent generator of benchmarks/
 robustness.py: eddying drift, gaps, range-faded and Markov-fading detection, multipath,
 outages, clock wander, a sound-speed mismatch, heavy-tailed noise, clutter bursts), writes
-them as mission directories and tracks every float from its files (`pipeline.track_float`)
+them as mission directories and tracks every float from its files (`run.one_float.track_float`)
 with the default settings, once with `--engine exact` and once with `--engine abc`, the
 only difference. Prints, per float and engine: RMSE, p95 and max error (km), labels right
 (the fraction of stored TOAs given their true beacon or clutter), 95%-ellipse coverage,
@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from rafostrack.evaluate import association_accuracy, inside_ellipse, position_errors_km
-from rafostrack.experiments.common import mean_se
-from rafostrack.pipeline import TrackInputs, load_float, track_float
-from rafostrack.posterior import ELLIPSE_95_SCALE
-from rafostrack.stress import StressConfig, simulate_stress, write_stress_mission
-from rafostrack.workers import single_threaded_math
+from papers.common import mean_se
+from rafostrack.batch.workers import single_threaded_math
+from rafostrack.run.one_float import TrackInputs, load_float, track_float
+from rafostrack.sim.evaluate import association_accuracy, inside_ellipse, position_errors_km
+from rafostrack.sim.stress import StressConfig, simulate_stress, write_stress_mission
+from rafostrack.summaries.posterior import ELLIPSE_95_SCALE
 
 ENGINES = ("exact", "abc")
 GEOMETRIES = ("dimes", "weddell")

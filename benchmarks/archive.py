@@ -3,7 +3,7 @@
 Simulates the DIMES experiment as an archive: the 140 real launch/recovery pairs
 (`benchmarks/data/dimes_all_floats.csv`, from `../shared/data`) and the 12 real sound
 sources, each float drifting from its launch to its recovery fix (integrated OU eddies
-around the mean velocity, `rafostrack.simulate`), arrival times simulated along the drift
+around the mean velocity, `rafostrack.sim.simulate`), arrival times simulated along the drift
 with the default measurement model (clutter 1 per window, multipath, echoes). The mission
 directory holds no `rafostrack.toml`, so the floats are tracked with the default settings,
 as a user's archive would be. Then runs the installed `rafostrack batch` on it as cron
@@ -35,9 +35,9 @@ import pandas as pd
 from rafostrack.batch import default_jobs
 from rafostrack.config import load_config
 from rafostrack.domain import FloatInfo
-from rafostrack.io.mission_writer import write_mission
-from rafostrack.scenarios import dimes_scenario
-from rafostrack.simulate import simulate_mission
+from rafostrack.sim.mission_writer import write_mission
+from rafostrack.sim.scenarios import dimes_scenario
+from rafostrack.sim.simulate import simulate_mission
 
 FLOATS_CSV = Path(__file__).resolve().parent / "data" / "dimes_all_floats.csv"
 

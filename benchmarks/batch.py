@@ -24,9 +24,9 @@ import numpy as np
 
 from rafostrack.batch import default_jobs
 from rafostrack.config import load_config
-from rafostrack.io.mission_writer import write_mission
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_mission
+from rafostrack.sim.mission_writer import write_mission
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_mission
 
 
 def _rafostrack() -> list[str]:

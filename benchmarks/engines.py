@@ -3,7 +3,7 @@
 For each clutter rate, simulate windows: s beacons around a float (planar geometry), a
 particle cloud around the float, and K stored TOAs of which min(Poisson(rate), K) are
 uniform clutter and the rest the earliest detected true arrivals (predicted arrival plus
-N(0, sigma^2) noise). Factors come from `rafostrack.model.association_factors` with the
+N(0, sigma^2) noise). Factors come from `rafostrack.model.measurement.association_factors` with the
 default configuration (clutter rate overridden). Prints, per clutter rate: mean and max
 |log Z_bp - log Z_exact| over all particles, max |p_match difference|, the number of
 particles where the Bethe estimate exceeds the exact log Z, BP sweeps used, and the
@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from rafostrack.config import ModelConfig, load_config, with_overrides
 from rafostrack.engines import Association, bp, exact
-from rafostrack.model import association_factors
+from rafostrack.model.measurement import association_factors
 
 CLUTTER_RATES = (0.5, 1.0, 2.0, 4.0)
 BOX_KM = 1000.0  # beacons uniform in a square of this side, float at its centre

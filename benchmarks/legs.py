@@ -35,12 +35,12 @@ import numpy as np
 import pandas as pd
 from scipy.stats import chi2
 
-from rafostrack.evaluate import inside_ellipse, position_errors_km
-from rafostrack.geodesy import local_offsets_km
 from rafostrack.legs.floats import legs_float
 from rafostrack.legs.summaries import velocity_samples
-from rafostrack.pipeline import TrackInputs
-from rafostrack.posterior import ELLIPSE_95_SCALE
+from rafostrack.model.geodesy import local_offsets_km
+from rafostrack.run.one_float import TrackInputs
+from rafostrack.sim.evaluate import inside_ellipse, position_errors_km
+from rafostrack.summaries.posterior import ELLIPSE_95_SCALE
 
 sys.path.insert(0, str(Path(__file__).parent))
 from robustness import make_missions

@@ -12,7 +12,7 @@ systematically when the effective sample size falls below N/2, and report the we
 position at each window. Each implementation is timed over the whole run (best of
 `--repeats`), after an untimed warm-up on a few windows (imports, numba caches):
 
-1. rafostrack, labelled: `Tracker.from_config(...).run_filter(record)` with calibration,
+1. rafostrack, labelled: `Tracker.from_problem(...).run_filter(record)` with calibration,
    smoother, recovery and the end fix off (the filter alone, association marginals off), and
    the same run through `Tracker.track` (the filter plus the per-window summary: modes,
    ellipses, labels), the call a user makes;
@@ -82,14 +82,15 @@ from stonesoup.types.hypothesis import SingleHypothesis
 from stonesoup.types.state import ParticleState
 from stonesoup.updater.particle import ParticleUpdater
 
-from rafostrack import model as m
 from rafostrack.config import Config, with_overrides
 from rafostrack.domain import ArrivalRecord, BeaconTable, FloatInfo
-from rafostrack.evaluate import rmse_km
-from rafostrack.filter import Step
-from rafostrack.geodesy import radii_of_curvature_m
-from rafostrack.pipeline import TrackInputs, load_float
-from rafostrack.tracker import Tracker
+from rafostrack.filtering.filter import Step
+from rafostrack.model import measurement as m
+from rafostrack.model.geodesy import radii_of_curvature_m
+from rafostrack.problem import FloatProblem
+from rafostrack.run.one_float import TrackInputs, load_float
+from rafostrack.run.one_pass import Tracker
+from rafostrack.sim.evaluate import rmse_km
 
 SAMPLE = Path(__file__).resolve().parents[1] / "rafostrack" / "data" / "samples" / "float767.csv"
 HALF_LOG_2PI = 0.5 * np.log(2.0 * np.pi)
@@ -194,7 +195,7 @@ def load_problem(float_file: Path, n_particles: int, n_windows: int | None) -> P
     """The sample float's first `n_windows` windows (all when None) with `n_particles`."""
     loaded = load_float(TrackInputs(float_file))
     config = with_overrides(
-        loaded.config,
+        loaded.problem.config,
         calibrate={"enabled": False},
         smoother={"enabled": False},
         recovery={"enabled": False},
@@ -206,7 +207,7 @@ def load_problem(float_file: Path, n_particles: int, n_windows: int | None) -> P
     )
     record = loaded.record
     record = dataclasses.replace(record, windows=record.windows[: n_windows or len(record.windows)])
-    info, beacons = loaded.info, loaded.beacons
+    info, beacons = loaded.problem.info, loaded.problem.beacons
     plane = Plane.about(info.launch_lat, info.launch_lon)
     bx, by = plane.forward(beacons.lat, beacons.lon)
     row = beacons.index_of()
@@ -249,7 +250,7 @@ def run_rafostrack(problem: Problem, likelihood: str = "labeled", *, whole_track
     """rafostrack's filter with `likelihood` (labeled, or ranked with the exact engine); the
     weighted mean position per window. `whole_tracker`: `Tracker.track` (filter and summaries)."""
     config = with_overrides(problem.config, filter={"likelihood": likelihood, "engine": "exact"})
-    tracker = Tracker.from_config(config, problem.beacons, problem.info)
+    tracker = Tracker.from_problem(FloatProblem(problem.beacons, problem.info, config))
     if whole_tracker:
         track = tracker.track(problem.record).track
         return pd.DataFrame({"time": track["time"], "lat": track["lat"], "lon": track["lon"]})

@@ -1,11 +1,11 @@
 """Robustness on the stress scenario: floats the tracker's own model did not make.
 
-Simulates missions with `rafostrack.stress` (two real arrays, DIMES and Weddell; clutter
+Simulates missions with `rafostrack.sim.stress` (two real arrays, DIMES and Weddell; clutter
 rates 1, 2, 3; 240 days; eddying drift around a meandering jet, recording gaps,
 range-faded and Markov-fading detection, multipath, source outages, clock wander, a
 sound-speed mismatch, heavy-tailed noise, clutter bursts), writes them as mission
 directories, and tracks every float as a user would, from the files
-(`pipeline.track_float`) with the DEFAULT settings, and with the true labels
+(`run.one_float.track_float`) with the DEFAULT settings, and with the true labels
 (`--likelihood labeled`, the reference a hand-labelling analyst would reach). Prints, per
 float: RMSE, p95 and max error (km), labels right, the labels an oracle gets at the true
 track with the true nuisances (`oracle_labels`: how ambiguous the float's arrivals are), 95%-
@@ -13,7 +13,7 @@ ellipse coverage, the status counts, the median ESS, the true-label filter's RMS
 ratio and its coverage, the run time, and the confidently wrong answers: windows more than
 30 km off with an sd_km under half the error (`confident_wrong`, and the true-label filter's),
 labels given with probability >= 0.99 that are wrong (`wrong_p99`) beside the number such
-probabilities predict (`expected_p99`); then the issue's targets, PASS or FAIL, with the
+probabilities predict (`expected_p99`); then the robustness targets, PASS or FAIL, with the
 floats failing each and those on which the target's reference fails it too (the true-label
 filter for p95 and coverage, the oracle for labels: what the data allow), and the
 reliability of the label probabilities over all floats (`evaluate.label_reliability`).
@@ -22,13 +22,16 @@ not seen.
 
     python benchmarks/robustness.py [--floats 24] [--days 240] [--seed 2026] [--workers 2]
                                     [--out DIR] [--config FILE] [--only ID ...] [--csv FILE]
-                                    [--filter-seeds 0 1 ...]
+                                    [--filter-seeds 0 1 ...] [--report docs/validation.md]
 
-A single run's per-float figures move with the filter's random path (README, Robustness):
+A single run's per-float figures move with the filter's random path (docs/decisions.md):
 `--filter-seeds` tracks every float once per `[filter] seed` given, prints the table per
 seed, then, per target, the floats that fail it with every seed, and per float how far
 the tracks of different seeds lie apart (`seed_spread`: the Monte Carlo error of the
 whole method, which the reported sd_km does not include).
+
+`--report FILE` also writes the tables, the targets and the label reliability into the
+`robustness` section of that Markdown file (`benchmarks/report.py`).
 """
 
 from __future__ import annotations
@@ -44,28 +47,29 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from report import markdown_table, write_section
 
+from rafostrack.batch.workers import single_threaded_math
 from rafostrack.config import with_overrides
 from rafostrack.domain import Particles
-from rafostrack.evaluate import (
+from rafostrack.likelihoods import arrivals_from_config
+from rafostrack.model.geodesy import local_offsets_km
+from rafostrack.run.one_float import LoadedFloat, TrackInputs, load_float, track_float
+from rafostrack.sim.evaluate import (
     confidently_wrong,
     inside_ellipse,
     label_reliability,
     label_scores,
     position_errors_km,
 )
-from rafostrack.geodesy import local_offsets_km
-from rafostrack.likelihoods import arrivals_from_config
-from rafostrack.pipeline import LoadedFloat, TrackInputs, load_float, track_float
-from rafostrack.posterior import ELLIPSE_95_SCALE
-from rafostrack.stress import DAY_NS, StressConfig, simulate_stress, write_stress_mission
-from rafostrack.workers import single_threaded_math
+from rafostrack.sim.stress import DAY_NS, StressConfig, simulate_stress, write_stress_mission
+from rafostrack.summaries.posterior import ELLIPSE_95_SCALE
 
 CLUTTER_RATES = (1.0, 2.0, 3.0)
 GEOMETRIES = ("dimes", "weddell")
 TRUE_LABELS = {"filter": {"likelihood": "labeled"}}  # the reference filter's one difference
 CONFIDENT_PROB = 0.99  # a label given with at least this probability is a confident one
-COVERAGE_RANGE = (0.88, 0.99)  # the issue's target for the 95% ellipses' coverage of the truth
+COVERAGE_RANGE = (0.88, 0.99)  # the target for the 95% ellipses' coverage of the truth
 
 
 def make_missions(root: Path, n_floats: int, days: int, seed: int) -> list[Path]:
@@ -95,7 +99,7 @@ def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFra
     propagation regimes; the model's are not), but clutter that lands within a few seconds of
     a source's predicted arrival is as ambiguous here as for the tracker. The rest of the model
     (e.g. the multipath delay law) is the run's configuration, `--config` layers included."""
-    b, info, per = loaded.beacons, loaded.info, events["beacons"]
+    b, info, per = loaded.problem.beacons, loaded.problem.info, events["beacons"]
     ids = list(b.beacon_id)
     beacons = dataclasses.replace(
         b,
@@ -111,7 +115,7 @@ def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFra
     half = events["multipath_fraction"] / 2
     model = {"toa_sigma_s": events["toa_sd_s"], "clutter_rate": events["clutter_rate"], "multipath_delay_s": 22.0}
     config = with_overrides(
-        loaded.config,
+        loaded.problem.config,
         filter={"likelihood": "ranked"},
         model={**model, "multipath_fraction": half, "echo_fraction": half},
     )
@@ -218,7 +222,7 @@ def seed_spread(out_root: Path, seeds: list[int], floats: list[str]) -> pd.DataF
 
 
 def targets(table: pd.DataFrame) -> list[tuple[str, list[str], list[str] | None]]:
-    """The issue's targets, the floats failing each, and the floats on which the target's
+    """The robustness targets, the floats failing each, and the floats on which the target's
     reference fails it too (None where the target is defined against the reference): the
     true-label filter for the p95 and coverage targets, the oracle's labels for the labels'."""
     low_clutter = table["clutter"] <= 2
@@ -265,6 +269,7 @@ def main() -> None:
     parser.add_argument("--only", nargs="+", help="float ids to run")
     parser.add_argument("--csv", type=Path, help="write the per-float table here")
     parser.add_argument("--filter-seeds", type=int, nargs="+", help="track every float with each [filter] seed")
+    parser.add_argument("--report", type=Path, help="write the results into this Markdown file's robustness section")
     args = parser.parse_args()
     root = args.out or Path(tempfile.mkdtemp(prefix="rafostrack-robustness-"))
     root.mkdir(parents=True, exist_ok=True)
@@ -289,33 +294,42 @@ def main() -> None:
             "ess_med", "ref_rmse_km", "ref_p95_km", "ratio", "ref_cover95", "seconds", *counts, "confident_wrong",
             "ref_confident_wrong", "wrong_p99", "expected_p99"]  # fmt: skip
     failing_with: list[list[tuple[str, list[str], list[str] | None]]] = []
+    sections: list[str] = []  # the report's text, one entry per seed and one for the seed spread
     for seed in seeds:
         runs = _of_seed(table, seed)
+        notes: list[str] = []  # the lines printed under the table, for the report
+
+        def say(line: str, notes: list[str] = notes) -> None:
+            print(line)
+            notes.append(line)
+
         if seed is not None:
             print(f"\n[filter] seed = {seed}")
         print(runs[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
         failing_with.append(targets(runs))
         for name, failing, reference in failing_with[-1]:
-            print(
+            say(
                 f"{'PASS' if not failing else 'FAIL'}: {name}"
                 + (f" ({len(failing)}: {', '.join(failing)})" if failing else "")
                 + (f"; its reference fails it on {len(reference)}" if reference is not None else "")
                 + (f" ({', '.join(reference)})" if reference else "")
             )
         wrong = runs.loc[runs["confident_wrong"] > 0, ["float", "confident_wrong"]]
-        print(
+        say(
             f"confidently wrong windows (> 30 km off, sd_km under half the error): {wrong['confident_wrong'].sum()}"
             f" of {runs['windows'].sum()}"
             + (f" ({', '.join(f'{f} {n}' for f, n in wrong.itertuples(index=False))})" if len(wrong) else "")
             + f"; the true-label filter's: {runs['ref_confident_wrong'].sum()}"
         )
-        print(
+        say(
             f"labels given with p >= {CONFIDENT_PROB}: {runs['wrong_p99'].sum()} wrong, "
             f"{runs['expected_p99'].sum():.1f} expected"
         )
         mine = _of_seed(labels, seed)
         print("label reliability, all floats (a calibrated labeller: right = mean_prob in every bin):")
-        print(label_reliability(mine).to_string(index=False, float_format=lambda x: f"{x:.4f}"))
+        reliability = label_reliability(mine)
+        print(reliability.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
+        sections.append(_seed_report(seed, runs[cols], notes, reliability))
     if len(seeds) > 1:
         print(f"\nfailing with every seed ({', '.join(map(str, seeds))}):")
         for k, (name, _, _) in enumerate(failing_with[0]):
@@ -329,9 +343,45 @@ def main() -> None:
             f"median spread {spread['spread_km'].median():.2f} km, {ratio.median():.0%} of the median sd_km "
             f"(largest: {ratio.idxmax()}, {ratio.max():.0%})"
         )
+        sections.append(_spread_report(seeds, failing_with, spread))
     print(f"\n{len(table)} runs in {time.perf_counter() - started:.0f} s ({args.workers} workers); outputs in {root}")
     if args.csv:
         table.to_csv(args.csv, index=False)
+    if args.report:
+        layers = f" plus {', '.join(map(str, args.config))}" if args.config else ""
+        setup = (
+            f"{len(files)} stress floats of {args.days} days (missions of seed {args.seed}; the defaults were tuned "
+            f"on seed 2026), tracked with the default settings{layers} "
+            f"and with the true labels (the true-label filter, `ref_*`); {len(table)} runs in "
+            f"{time.perf_counter() - started:.0f} s with {args.workers} workers."
+        )
+        write_section(args.report, "robustness", "\n\n".join([setup, *sections]))
+
+
+def _seed_report(seed: int | None, runs: pd.DataFrame, notes: list[str], reliability: pd.DataFrame) -> str:
+    """The report's text for one filter seed: the per-float table, the targets and the label reliability."""
+    title = "Per float" + (f" (`[filter] seed = {seed}`)" if seed is not None else "")
+    percent = {c: (lambda x: f"{x:.1%}") for c in ("labels", "labels_oracle", "cover95", "ref_cover95")}
+    wide = {c: (lambda x: f"{x:.1f}") for c in ("ess_med", "seconds", "expected_p99")}
+    given = {c: (lambda x: f"{x:.2f}") for c in ("rmse_km", "p95_km", "max_km", "ref_rmse_km", "ref_p95_km", "ratio")}
+    given["clutter"] = lambda x: f"{x:g}"
+    lines = [f"**{title}** (km; `labels_oracle`: labels at the true track; `cover95`: 95%-ellipse coverage):", ""]
+    lines += [markdown_table(runs, {**percent, **wide, **given}), "", "**Targets and confident answers:**", ""]
+    lines += [f"- {note}" for note in notes]
+    lines += ["", "**Label reliability**, all floats (a calibrated labeller: right = mean_prob in every bin):", ""]
+    lines.append(markdown_table(reliability, {c: (lambda x: f"{x:.4f}") for c in ("mean_prob", "right")}))
+    return "\n".join(lines)
+
+
+def _spread_report(seeds: list[int | None], failing_with: list, spread: pd.DataFrame) -> str:
+    """The report's text over several filter seeds: the floats failing with every seed, the seed spread."""
+    lines = [f"**Failing with every seed** ({', '.join(map(str, seeds))}):", ""]
+    for k, (name, _, _) in enumerate(failing_with[0]):
+        always = sorted(set.intersection(*(set(per_seed[k][1]) for per_seed in failing_with)))
+        lines.append(f"- {name}: {len(always)}" + (f" ({', '.join(always)})" if always else ""))
+    lines += ["", "**Seed spread** (RMS distance of each seed's track from their mean, km) and the median sd_km:", ""]
+    lines.append(markdown_table(spread.rename_axis("float").reset_index(), {}))
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,10 @@ finding what to optimise. Run on one core (`OMP_NUM_THREADS=1 taskset -c 0`) for
 that do not depend on what else runs.
 
     python benchmarks/speed.py [--methods exact bp] [--particles 1000 10000] [--config FILE] [--profile]
+                               [--report docs/validation.md]
+
+`--report FILE` also writes the table into the `speed` section of that Markdown file
+(`benchmarks/report.py`).
 """
 
 from __future__ import annotations
@@ -21,11 +25,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from report import machine, markdown_table, write_section
 
 from rafostrack.config import method_overrides, with_overrides
-from rafostrack.evaluate import association_accuracy, rmse_km
-from rafostrack.method import track_record
-from rafostrack.pipeline import TrackInputs, load_float
+from rafostrack.run.method import track_record
+from rafostrack.run.one_float import TrackInputs, load_float
+from rafostrack.sim.evaluate import association_accuracy, rmse_km
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data" / "samples" / "float767.csv"
 
@@ -37,29 +42,33 @@ def main() -> None:
     parser.add_argument("--particles", type=int, nargs="+", default=[1000, 10000])
     parser.add_argument("--config", type=Path, action="append", default=[], help="an extra config layer")
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--report", type=Path, help="write the table into this Markdown file's speed section")
     args = parser.parse_args()
 
     loaded = load_float(TrackInputs(args.float_file, config_files=tuple(args.config)))
     n_windows = len(loaded.record.windows)
     n_toas = sum(w.n_signals for w in loaded.record.windows)
-    print(f"{args.float_file.name}: {n_windows} windows, {n_toas} TOAs, {len(loaded.beacons)} beacons")
+    header = f"{args.float_file.name}: {n_windows} windows, {n_toas} TOAs, {len(loaded.problem.beacons)} beacons"
+    print(header)
     truth = pd.read_csv(args.float_file.parent / "truth" / args.float_file.name, parse_dates=["time"])
     truth["time"] = truth["time"].dt.tz_localize(None)
     print(
         f"{'method':>9} {'particles':>9} {'total_s':>8} {'filter_s':>9} {'smoother_s':>10} {'calib_s':>8} "
         f"{'rmse_km':>8} {'labels':>7} {'ess/N':>6}"
     )
+    rows = []
     for method in args.methods:
         for particles in args.particles:
-            config = with_overrides(loaded.config, filter={**method_overrides(method), "particles": particles})
+            config = with_overrides(loaded.problem.config, filter={**method_overrides(method), "particles": particles})
             profiler = cProfile.Profile() if args.profile else None
             started = time.perf_counter()
             if profiler:
                 profiler.enable()
-            out = track_record(loaded.beacons, loaded.info, config, loaded.record, explicit=loaded.explicit)
+            out = track_record(loaded.problem.with_config(config), loaded.record)
             if profiler:
                 profiler.disable()
             elapsed = time.perf_counter() - started
+            rows.append(_row(method, particles, elapsed, out, truth, loaded))
             print(
                 f"{method:>9} {particles:9d} {elapsed:8.2f} {out.filter_s:9.2f} {out.smoother_s:10.2f} "
                 f"{out.calibrate_s:8.2f} {rmse_km(out.track, truth):8.2f} "
@@ -69,6 +78,33 @@ def main() -> None:
             )
             if profiler:
                 pstats.Stats(profiler).sort_stats("cumulative").print_stats(15)
+    if args.report:
+        write_section(args.report, "speed", _report(header, pd.DataFrame(rows)))
+
+
+def _row(method: str, particles: int, elapsed_s: float, out, truth: pd.DataFrame, loaded) -> dict:
+    """One line of the report's table: the timings and scores of one method and particle count."""
+    return {
+        "method": method,
+        "particles": particles,
+        "total_s": elapsed_s,
+        "filter_s": out.filter_s,
+        "smoother_s": out.smoother_s,
+        "calib_s": out.calibrate_s,
+        "rmse_km": rmse_km(out.track, truth),
+        "labels": association_accuracy(out.labels, loaded.record),
+        "ess/N": float(np.median(out.filter_ess) / particles),
+    }
+
+
+def _report(header: str, table: pd.DataFrame) -> str:
+    """The speed section: what was tracked, on which machine, and the table."""
+    seconds = {c: (lambda x: f"{x:.2f}") for c in ("total_s", "filter_s", "smoother_s", "calib_s", "rmse_km", "ess/N")}
+    return (
+        "Wall time of the whole method (every pass) on the 2-year sample float, split into filter, smoother "
+        "and calibration; RMSE against the sample's truth, labels right, median ESS of the last pass over N.\n\n"
+        f"{header}; {machine()}.\n\n" + markdown_table(table, {**seconds, "labels": lambda x: f"{x:.2%}"})
+    )
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@
 
 A float is given as a file (any registered arrival format, with `beacons.csv` and
 `floats.csv` found beside it as for `rafostrack track`) or as DataFrames in the CSV
-columns (README, "Inputs"), which are checked exactly as files are (they are written to a
+columns (docs/user-guide.md, "Inputs"), which are checked exactly as files are (they are written to a
 temporary mission directory and read back by the same readers). Configuration keys are
 keyword arguments: a key's bare name when only one section has it (`particles=500`,
 `p_detect=0.8`), else `<section>_<key>` (`calibrate_enabled=False`); `smooth=False` turns the
@@ -26,10 +26,10 @@ from typing import Any
 
 import pandas as pd
 
-from .config import SECTIONS, Config
-from .domain import BeaconTable, FloatInfo
+from .config import SECTIONS
 from .errors import InputError, nearest
-from .tracker import TrackOutput
+from .problem import FloatProblem
+from .run.one_pass import TrackOutput
 
 
 def _flat_keys() -> dict[str, tuple[str, str]]:
@@ -70,9 +70,7 @@ class TrackRun:
     modes: pd.DataFrame
     run_info: dict[str, Any]
     output: TrackOutput
-    beacons: BeaconTable
-    info: FloatInfo
-    config: Config
+    problem: FloatProblem  # the float's beacons, description and configuration, as loaded
     out_dir: Path | None = None
 
     def plot(self, kind: str = "track", path: str | Path | None = None, **extra: Any):
@@ -85,12 +83,11 @@ class TrackRun:
 
         fig = Figure(figsize=base.FIGSIZE, dpi=base.DPI, layout="constrained")
         FigureCanvasAgg(fig)
+        beacons, info = self.problem.beacons, self.problem.info
         if kind == "track":
-            draw_track(
-                fig, self.track, self.beacons, self.info, extra.get("truth"), self.modes, extra.get("background")
-            )
+            draw_track(fig, self.track, beacons, info, extra.get("truth"), self.modes, extra.get("background"))
         elif kind == "arrivals":
-            draw_arrivals(fig, self.labels, self.track, self.beacons, self.info, self.config.model)
+            draw_arrivals(fig, self.labels, self.track, beacons, info, self.problem.config.model)
         elif kind == "uncertainty":
             draw_uncertainty(fig, self.track)
         else:
@@ -159,8 +156,8 @@ def _track_files(
     formats: tuple[str, ...],
     input_format: str | None,
 ) -> TrackRun:
-    from .method import track_record
-    from .pipeline import TrackInputs, load_float, run_record, track_float
+    from .run.method import track_record
+    from .run.one_float import TrackInputs, load_float, run_record, track_float
 
     arrivals = paths["arrivals"]
     assert arrivals is not None
@@ -179,8 +176,9 @@ def _track_files(
         output, run, out_dir = result.output, result.run, result.out_dir
     else:
         started = time.perf_counter()
-        output = track_record(loaded.beacons, loaded.info, loaded.config, loaded.record, explicit=loaded.explicit)
+        output = track_record(loaded.problem, loaded.record)
         run, out_dir = run_record(inputs, loaded, output, time.perf_counter() - started), None
     est = output.estimate
-    return TrackRun(loaded.info.float_id, est.track, est.labels, est.modes, run, output, loaded.beacons, loaded.info,
-                    loaded.config, out_dir)  # fmt: skip
+    return TrackRun(
+        loaded.problem.info.float_id, est.track, est.labels, est.modes, run, output, loaded.problem, out_dir
+    )

@@ -18,7 +18,7 @@ from . import __version__
 from .errors import InputError
 
 if TYPE_CHECKING:  # the pipeline is imported when a command runs, not at start-up
-    from .pipeline import TrackInputs
+    from .run.one_float import TrackInputs
 
 
 def _report_errors(func):
@@ -202,8 +202,8 @@ def _track_inputs(
     overrides: dict[str, dict[str, Any]],
     input_format: str | None = None,
 ) -> TrackInputs:
-    """`pipeline.TrackInputs` from the options of `float_inputs`."""
-    from .pipeline import TrackInputs
+    """`run.one_float.TrackInputs` from the options of `float_inputs`."""
+    from .run.one_float import TrackInputs
 
     return TrackInputs(
         float_path=float_file,
@@ -279,13 +279,13 @@ def track(
 ):
     """Label every TOA of FLOAT_FILE and estimate the float's track."""
     from .io.output_formats import parse_formats
-    from .pipeline import track_float
+    from .run.one_float import track_float
 
     _refuse_method(method)
     formats = parse_formats(output_format)
     overrides = _overrides(**flags, smooth=False if no_smooth else None)
     inputs = _track_inputs(float_file, beacons, floats, launch, config_file, overrides, input_format)
-    from . import progress as progress_module
+    from .run import progress as progress_module
 
     progress = progress_module.progress_for(sys.stderr, label=float_file.stem)
     try:
@@ -355,9 +355,9 @@ def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> N
     import numpy as np
 
     from .config import load_config
-    from .io.mission_writer import write_mission
-    from .scenarios import dimes_scenario, synthetic_scenario
-    from .simulate import simulate_mission
+    from .sim.mission_writer import write_mission
+    from .sim.scenarios import dimes_scenario, synthetic_scenario
+    from .sim.simulate import simulate_mission
 
     config = load_config((config_file,) if config_file else (), _overrides(**flags))
     rng = np.random.default_rng(seed)
@@ -414,9 +414,9 @@ def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots,
 def show_config(mission, config_file, **flags) -> None:
     """Print the effective configuration for MISSION (a mission directory or a float file in
     it; default: none, the package defaults), each key with the layer it came from."""
-    from .config_report import COMMAND_LINE, layered_config, render
     from .errors import InputError
-    from .pipeline import MISSION_CONFIG
+    from .io.config_report import COMMAND_LINE, layered_config, render
+    from .run.one_float import MISSION_CONFIG
 
     files: list[Path] = []
     if mission is not None:

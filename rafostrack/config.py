@@ -95,7 +95,7 @@ class MotionConfig:
 
 @dataclass(frozen=True)
 class RecoveryConfig:
-    """Robust drift and lost-track recovery (`rafostrack.recovery`)."""
+    """Robust drift and lost-track recovery (`rafostrack.filtering.recovery`)."""
 
     enabled: bool = setting()
     jump_rate_per_day: float = setting(">= 0", _non_negative)
@@ -150,7 +150,7 @@ class FilterConfig:
     seed: int = setting(">= 0", _non_negative)
     likelihood: str = setting(choices=_registry("rafostrack.likelihoods", "ARRIVAL_LIKELIHOODS"))
     engine: str = setting(choices=_registry("rafostrack.engines", "ENGINES"))
-    resampling: str = setting(choices=_registry("rafostrack.resampling", "RESAMPLERS"))
+    resampling: str = setting(choices=_registry("rafostrack.filtering.resampling", "RESAMPLERS"))
     resample_ess_fraction: float = setting("in [0, 1]", _fraction)
     guided_fraction: float = setting("in [0, 1)", lambda v: 0 <= v < 1)
     mode_link_km: float = setting("> 0", _positive)
@@ -169,7 +169,7 @@ class BPConfig:
 @dataclass(frozen=True)
 class QualityConfig:
     """Correlation height (the arrival file's `quality`) as evidence of source vs clutter
-    (`rafostrack.quality`): Gaussian class-conditional densities of the height."""
+    (`rafostrack.likelihoods.quality`): Gaussian class-conditional densities of the height."""
 
     enabled: bool = setting()
     source_mean: float = setting()
@@ -224,6 +224,12 @@ class LegsConfig:
 
 @dataclass(frozen=True)
 class Config:
+    """The effective configuration: one dataclass per section, and which keys the user set.
+
+    `explicit` holds the (section, key) pairs a config file or the command line sets (not
+    the defaults, whatever their values): calibration keeps those as set. It is not a
+    section: `to_dict()` (run.json, Parquet metadata) leaves it out."""
+
     model: ModelConfig
     motion: MotionConfig
     recovery: RecoveryConfig
@@ -237,12 +243,16 @@ class Config:
     context: ContextConfig
     abc: ABCConfig
     legs: LegsConfig
+    explicit: frozenset[tuple[str, str]] = frozenset()  # keys the user set: not estimated
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        return asdict(self)
+        """Every section's values by key (not `explicit`)."""
+        return {name: asdict(getattr(self, name)) for name in SECTIONS}
 
 
-SECTIONS: dict[str, type] = {f.name: get_type_hints(Config)[f.name] for f in dataclasses.fields(Config)}
+SECTIONS: dict[str, type] = {
+    f.name: get_type_hints(Config)[f.name] for f in dataclasses.fields(Config) if f.name != "explicit"
+}
 
 # The paper's methods, each a (likelihood, engine) pair; they were the values of the
 # removed `[filter] method` key and name the compared methods in experiments and benchmarks.
@@ -401,21 +411,22 @@ def merge_layer(base: dict[str, dict[str, Any]], layer: dict[str, Any], source: 
     return merged
 
 
-def _build(layers: dict[str, dict[str, Any]]) -> Config:
-    return Config(**{name: cls(**layers[name]) for name, cls in SECTIONS.items()})
+def _build(layers: dict[str, dict[str, Any]], explicit: frozenset[tuple[str, str]] = frozenset()) -> Config:
+    return Config(**{name: cls(**layers[name]) for name, cls in SECTIONS.items()}, explicit=explicit)
 
 
 def load_config(
     files: list[Path] | tuple[Path, ...] = (),
     overrides: dict[str, dict[str, Any]] | None = None,
 ) -> Config:
-    """Build the effective configuration: defaults, then each file, then `overrides`."""
+    """Build the effective configuration: defaults, then each file, then `overrides`; its
+    `explicit` keys are those the files and `overrides` set (`explicit_keys`)."""
     layers = merge_layer({}, default_layer(), "default.toml")
     for path in files:
         layers = merge_layer(layers, _read_toml(Path(path)), str(path))
     if overrides:
         layers = merge_layer(layers, overrides, "command line")
-    return _build(layers)
+    return _build(layers, frozenset(explicit_keys(files, overrides)))
 
 
 def explicit_keys(
@@ -429,5 +440,6 @@ def explicit_keys(
 
 
 def with_overrides(config: Config, **sections: dict[str, Any]) -> Config:
-    """A copy of `config` with some keys replaced, validated like any other layer."""
-    return _build(merge_layer(config.to_dict(), sections, "override"))
+    """A copy of `config` with some keys replaced, validated like any other layer; the keys
+    the user set stay `config.explicit` (a program's override is not the user's)."""
+    return _build(merge_layer(config.to_dict(), sections, "override"), config.explicit)

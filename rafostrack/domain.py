@@ -40,7 +40,7 @@ class BeaconTable:
     end: NDArray[np.datetime64]
     # Per-beacon model values (NaN, or None for all, = the configuration's): effective
     # sound speed along the beacon's paths, peak detection probability, and the range at
-    # which it has halved (see `model.detection_prob`). Set by calibration.
+    # which it has halved (see `model.measurement.detection_prob`). Set by calibration.
     sound_speed_m_s: NDArray[np.float64] | None = None
     p_detect: NDArray[np.float64] | None = None
     detection_range_km: NDArray[np.float64] | None = None

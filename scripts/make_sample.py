@@ -4,7 +4,7 @@ It lives in rafostrack/data/samples/ (package data; data/samples is a link to it
 
 The DIMES floats 759, 767 and 811 drift between their real launch and recovery fixes;
 the 12 sound sources have their real positions, transmission slots and deployment dates;
-the arrival times are simulated with `rafostrack.simulate` (see its module docstring) under
+the arrival times are simulated with `rafostrack.sim.simulate` (see its module docstring) under
 the default model except `detection_range_km` (1000 km, the DIMES source range).
 
     python scripts/make_sample.py          # writes rafostrack/data/samples/ (also: make sample)
@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from rafostrack.config import load_config
-from rafostrack.io.mission_writer import write_mission
-from rafostrack.scenarios import dimes_scenario
-from rafostrack.simulate import simulate_mission, summarize
+from rafostrack.sim.mission_writer import write_mission
+from rafostrack.sim.scenarios import dimes_scenario
+from rafostrack.sim.simulate import simulate_mission, summarize
 
 DEFAULT_OUTDIR = Path(__file__).resolve().parents[1] / "rafostrack" / "data" / "samples"
 SEED = 20090123

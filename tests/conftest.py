@@ -10,8 +10,8 @@ import pytest
 from support import simulated_mission_dir
 
 from rafostrack.config import load_config
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import SimulatedMission, simulate_mission
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import SimulatedMission, simulate_mission
 
 
 @pytest.fixture(scope="session")

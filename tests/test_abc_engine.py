@@ -17,8 +17,9 @@ from rafostrack.domain import Particles, Window
 from rafostrack.engines import ENGINES, SimulatingEngine, WindowPrediction, engine_from_config, exact
 from rafostrack.engines.abc import ABCEngine, align, simulate_windows
 from rafostrack.likelihoods import RankedArrivals, arrivals_from_config
-from rafostrack.model import association_factors
-from rafostrack.tracker import Tracker
+from rafostrack.model.measurement import association_factors
+from rafostrack.problem import FloatProblem
+from rafostrack.run.one_pass import Tracker
 
 WINDOW_S = 4200.0
 
@@ -210,7 +211,7 @@ def test_a_float_tracked_with_abc_is_reproducible_bit_for_bit(sim_mission):
     config = with_overrides(load_config(), filter={"engine": "abc", "particles": 150})
 
     def run(cfg):
-        return Tracker.from_config(cfg, sim_mission.beacons, sim.info).track(record)
+        return Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, cfg)).track(record)
 
     a, b = run(config), run(config)
     assert a.track.equals(b.track) and a.labels.equals(b.labels)

@@ -1,4 +1,4 @@
-"""The ABC paper's experiments at tiny size (rafostrack.experiments.abc): every script runs,
+"""The ABC paper's experiments at tiny size (papers.abc): every script runs,
 writes its files and sane numbers, is deterministic, and the report builds from them."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from rafostrack.experiments.abc import fig2_single, fig3_5_trajectories, report, table1_rmse
-from rafostrack.experiments.abc.setting import PAPER_TABLE1, CellTask, run_task
-from rafostrack.experiments.runner import PAPERS, paper_main
+from papers.abc import fig2_single, fig3_5_trajectories, report, table1_rmse
+from papers.abc.setting import PAPER_TABLE1, CellTask, run_task
+from papers.runner import PAPERS, paper_main
 
 
 @pytest.fixture(scope="module")

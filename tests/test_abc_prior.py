@@ -1,12 +1,12 @@
-"""One step's prior pi_0, the pseudo-likelihood f and the ABC distance (rafostrack.abc.prior)."""
+"""One step's prior pi_0, the pseudo-likelihood f and the ABC distance (rafostrack.sensors.prior)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from rafostrack.abc.prior import StepPrior, distances, log_pseudo_likelihood
-from rafostrack.abc.sensors import sensor_grid, simulate_counts
+from rafostrack.sensors.prior import StepPrior, distances, log_pseudo_likelihood
+from rafostrack.sensors.sensors import sensor_grid, simulate_counts
 
 
 def make_prior() -> StepPrior:

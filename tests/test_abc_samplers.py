@@ -1,5 +1,5 @@
 """ABC-Rej, ABC-RW, ABC-PT and the exact MCMC against brute-force grid posteriors on a tiny
-case: one target, nine sensors, one step (rafostrack.abc.samplers).
+case: one target, nine sensors, one step (rafostrack.sensors.samplers).
 
 The oracle evaluates on a fine grid of theta = v_t:
 - the exact posterior pi_0(theta) p(c | theta) (eq. 6);
@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from rafostrack.abc.prior import StepPrior, log_pseudo_likelihood
-from rafostrack.abc.samplers import abc_chain_step, mcmc_step, rejection_step, tolerance_ladder
-from rafostrack.abc.sensors import approaching, log_likelihood, sensor_grid, simulate_counts
+from rafostrack.sensors.prior import StepPrior, log_pseudo_likelihood
+from rafostrack.sensors.samplers import abc_chain_step, mcmc_step, rejection_step, tolerance_ladder
+from rafostrack.sensors.sensors import approaching, log_likelihood, sensor_grid, simulate_counts
 
 PE = 0.85
 SD = 0.5

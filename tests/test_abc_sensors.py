@@ -1,4 +1,4 @@
-"""The binary sensor network and target simulator of the ABC paper (rafostrack.abc.sensors)."""
+"""The binary sensor network and target simulator of the ABC paper (rafostrack.sensors.sensors)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from rafostrack.abc.sensors import (
+from rafostrack.sensors.sensors import (
     approaching,
     log_likelihood,
     reported_counts,

@@ -1,13 +1,13 @@
-"""The tracking loop of the ABC paper and its scores (rafostrack.abc.tracking)."""
+"""The tracking loop of the ABC paper and its scores (rafostrack.sensors.tracking)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from rafostrack.abc.prior import StepPrior, distances
-from rafostrack.abc.sensors import sensor_grid, simulate_truth
-from rafostrack.abc.tracking import (
+from rafostrack.sensors.prior import StepPrior, distances
+from rafostrack.sensors.sensors import sensor_grid, simulate_truth
+from rafostrack.sensors.tracking import (
     ALGORITHMS,
     Settings,
     expected_distance,

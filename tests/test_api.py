@@ -1,4 +1,4 @@
-"""The Python API (issue 14 item 8): `rafostrack.track` from files and DataFrames; README's example runs."""
+"""The Python API: `rafostrack.track` from files and DataFrames; README's example runs."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from rafostrack.errors import InputError
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 def test_readme_example_runs(monkeypatch, capsys):
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     section = text[text.index("## Python API") :]

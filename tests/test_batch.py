@@ -29,10 +29,10 @@ from support import parquet_bytes, timing_free
 
 from rafostrack import batch as b
 from rafostrack.cli import main
-from rafostrack.config import load_config
-from rafostrack.io.mission_writer import write_mission
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_mission
+from rafostrack.config import default_layer, load_config
+from rafostrack.sim.mission_writer import write_mission
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_mission
 
 MISSIONS = ("deep/m2", "m1")
 FLOATS = [(m, f"sim{i}") for m in MISSIONS for i in (1, 2, 3)]
@@ -202,6 +202,30 @@ def test_incremental_reprocesses_exactly_what_changed(work_tree, tmp_path):
     assert _summary(out)["m1", "sim1"]["reason"] == "forced"
 
 
+def test_default_valued_key_in_mission_config_retracks_the_float(tmp_path):
+    """A key the user sets is kept as set, not calibrated: writing the default sound speed
+    into a mission's rafostrack.toml changes the track, so the float is tracked again."""
+    default = default_layer()["model"]["sound_speed_m_s"]
+    assert default == load_config().model.sound_speed_m_s == 1480.0
+    rng = np.random.default_rng(100)
+    beacons, floats = synthetic_scenario(days=30, n_floats=1, rng=rng)  # enough arrivals to calibrate
+    write_mission(simulate_mission(beacons, floats, load_config().model, rng), tmp_path / "archive" / "m")
+    toml = tmp_path / "archive" / "m" / "rafostrack.toml"
+    toml.write_text("[filter]\nparticles = 150\n")  # the simulated model is the default one: no [model]
+    out = tmp_path / "out"
+    result = _batch(tmp_path / "archive", out)
+    assert result.exit_code == 0, result.output
+    assert _statuses(out)["processed"] == {("m", "sim1")}
+    first = (out / "m" / "sim1" / "track.parquet").read_bytes()
+
+    toml.write_text(toml.read_text() + f"[model]\nsound_speed_m_s = {default}\n")
+    result = _batch(tmp_path / "archive", out)
+    assert result.exit_code == 0, result.output
+    assert _statuses(out)["processed"] == {("m", "sim1")}
+    assert _summary(out)["m", "sim1"]["reason"] == "config changed"
+    assert (out / "m" / "sim1" / "track.parquet").read_bytes() != first  # the sound speed held, not fitted
+
+
 def test_a_corrupt_float_fails_alone(work_tree, tmp_path):
     (work_tree / "m1" / "sim2.csv").write_text("time,toa_s\n2010-01-01T00:00:00Z,12.5\n2010-01-02T00:00:00Z,abc\n")
     (work_tree / "deep" / "m2" / "sim4.csv").write_text("time,toa_s\n")  # not in floats.csv: ignored
@@ -230,15 +254,26 @@ def test_an_unreadable_floats_table_fails_its_mission_only(work_tree, tmp_path):
     assert "separated by ';'" in _summary(out)["m1", "sim1"]["reason"]
 
 
-def test_jobs_2_gives_the_same_bytes_as_jobs_1(tree, baseline, tmp_path):
+@pytest.mark.reliability
+def test_jobs_2_and_track_give_the_same_outputs_as_jobs_1(tree, baseline, tmp_path):
+    """`batch --jobs 2` writes the Parquet bytes and (timings aside) the run.json of `--jobs 1`,
+    and `rafostrack track` on one float the Parquet bytes of the batch."""
     out = tmp_path / "out"
     result = _batch(tree, out, "--jobs", "2")
     assert result.exit_code == 0, result.output
     ours, ref = _parquet_bytes(out), _parquet_bytes(baseline)
     assert len(ref) >= 12 and ours.keys() == ref.keys()
     assert all(ours[k] == ref[k] for k in ref)
+    for mission, fid in FLOATS:
+        run_1, run_2 = (json.loads((d / mission / fid / "run.json").read_text()) for d in (baseline, out))
+        assert timing_free(run_1) == timing_free(run_2)
+    args = ["track", str(tree / "m1" / "sim2.csv"), "--out", str(tmp_path / "t"), "--no-plots"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    assert parquet_bytes(tmp_path / "t" / "sim2") == parquet_bytes(out / "m1" / "sim2")
 
 
+@pytest.mark.slow
 def test_dask_gives_the_same_bytes_as_local(tree, baseline, tmp_path):
     distributed = pytest.importorskip("distributed")
     out = tmp_path / "out"
@@ -294,6 +329,7 @@ def test_a_worker_with_another_rafostrack_version_writes_nothing(tree, tmp_path)
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_sigkill_leaves_no_partial_output_and_a_rerun_finishes(work_tree, tmp_path):
     out = tmp_path / "out"
     cfg = _slow_config(tmp_path)
@@ -330,6 +366,7 @@ def test_sigkill_leaves_no_partial_output_and_a_rerun_finishes(work_tree, tmp_pa
         pq.read_table(path)
 
 
+@pytest.mark.slow
 def test_a_second_concurrent_run_does_not_write(work_tree, tmp_path):
     out = tmp_path / "out"
     cfg = _slow_config(tmp_path)
@@ -432,29 +469,3 @@ def test_progress_bar_on_a_terminal_and_lines_otherwise():
         "rafostrack batch: [1/2] m1/sim1 processed in 1.0 s (new)",
         "rafostrack batch: [2/2] m1/sim2 failed: sim2.csv: line 3: bad",
     ]
-
-
-@pytest.mark.reliability
-def test_batch_jobs_do_not_change_outputs(tmp_path):
-    """`batch --jobs 1` and `--jobs 2` (run as subprocesses: worker pools stay out of the
-    test process) and `track` give the same Parquet bytes."""
-    if "batch" not in main.commands:
-        pytest.skip("no batch command")
-    exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
-    mission = tmp_path / "m"
-    result = CliRunner().invoke(main, ["simulate", str(mission), "--days", "10", "--n-floats", "2", "--seed", "4"])
-    assert result.exit_code == 0, result.output
-    with open(mission / "rafostrack.toml", "a") as fh:
-        fh.write("\n[filter]\nparticles = 100\n")
-    for jobs in ("1", "2"):
-        args = [exe, "batch", str(mission), "--out", str(tmp_path / jobs), "--jobs", jobs, "--no-plots"]
-        proc = subprocess.run(args, capture_output=True, text=True, check=False, timeout=300)
-        assert proc.returncode == 0, proc.stderr
-    result = CliRunner().invoke(main, ["track", str(mission / "sim2.csv"), "--out", str(tmp_path / "t"), "--no-plots"])
-    assert result.exit_code == 0, result.output
-    for fid in ("sim1", "sim2"):
-        one, two = (next((tmp_path / j).rglob(fid)) for j in ("1", "2"))
-        assert parquet_bytes(one) and parquet_bytes(one) == parquet_bytes(two)
-        run_1, run_2 = (json.loads((d / "run.json").read_text()) for d in (one, two))
-        assert timing_free(run_1) == timing_free(run_2)
-    assert parquet_bytes(tmp_path / "t" / "sim2") == parquet_bytes(next((tmp_path / "2").rglob("sim2")))

@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 
 from rafostrack.config import load_config
-from rafostrack.io.mission_writer import write_mission
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_mission
+from rafostrack.sim.mission_writer import write_mission
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_mission
 
 FLOAT_IDS = ("sim1", "sim2")
 
@@ -51,6 +51,7 @@ def _summary(out: Path) -> dict[str, dict[str, str]]:
         return {row["float_id"]: row for row in csv.DictReader(fh)}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "package_init",
     [None, "answer = 42  # an unrelated package that happens to be called rafostrack\n"],

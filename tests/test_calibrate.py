@@ -13,13 +13,20 @@ from scipy.special import expit
 from rafostrack.calibrate import CALIBRATED_KEYS, MIN_ARRIVALS, Calibration, calibrate
 from rafostrack.calibrate.detection import MIN_OPPORTUNITIES, fit_detection
 from rafostrack.config import load_config, with_overrides
-from rafostrack.estimates import Estimate
-from rafostrack.model import predicted_toa_s, window_beacons
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_mission
+from rafostrack.model.measurement import predicted_toa_s, window_beacons
+from rafostrack.problem import FloatProblem
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_mission
+from rafostrack.summaries.estimates import Estimate
 
 CONFIG = load_config()
 C_TRUE = 1486.0
+
+
+def _calibrate(estimate, record, beacons, info, config=CONFIG, explicit=frozenset()):
+    """`calibrate` of the float's problem under `config`, with `explicit` as the keys the user set."""
+    problem = FloatProblem(beacons, info, dataclasses.replace(config, explicit=frozenset(explicit)))
+    return calibrate(estimate, record, problem)
 
 
 def _first_pass(days: int, seed: int, **model_changes):
@@ -52,7 +59,7 @@ def first_pass():
 
 @pytest.fixture(scope="module")
 def calibrated(first_pass) -> Calibration:
-    return calibrate(*first_pass, CONFIG)
+    return _calibrate(*first_pass, CONFIG)
 
 
 EXPLICIT = {("model", "toa_sigma_s"), ("motion", "decorrelation_days"), ("model", "clutter_rate")}
@@ -72,7 +79,7 @@ def test_every_calibrated_key_is_estimated_and_applied(first_pass, calibrated):
 def test_explicit_keys_are_kept_not_estimated(first_pass, calibrated):
     """Keys the user set are absent from the estimates, keep the configured values when
     applied and are reported as kept; the other Kalman-fitted keys are as without them."""
-    kept = calibrate(*first_pass, CONFIG, explicit=EXPLICIT)
+    kept = _calibrate(*first_pass, CONFIG, explicit=EXPLICIT)
     assert kept is not None
     assert EXPLICIT.isdisjoint(kept.values)
     assert set(kept.values) == set(CALIBRATED_KEYS) - EXPLICIT
@@ -88,7 +95,7 @@ def test_explicit_keys_are_kept_not_estimated(first_pass, calibrated):
 
 def test_an_explicit_sound_speed_is_the_one_the_calibrated_pass_uses(first_pass):
     estimate, record, beacons, info = first_pass
-    kept = calibrate(estimate, record, beacons, info, CONFIG, explicit={("model", "sound_speed_m_s")})
+    kept = _calibrate(estimate, record, beacons, info, CONFIG, explicit={("model", "sound_speed_m_s")})
     config = kept.apply(CONFIG)
     assert config.model.sound_speed_m_s == CONFIG.model.sound_speed_m_s
     wb = window_beacons(kept.beacons, kept.info, record.windows[5].time)
@@ -101,9 +108,9 @@ def test_the_clock_random_walk_is_not_fitted_below_its_floor(first_pass, calibra
     """`[calibrate] min_clock_rate_sd_s_per_day` bounds the fitted clock wander from below:
     a floor above the value fitted without one is where the fit stops."""
     free = with_overrides(CONFIG, calibrate={"min_clock_rate_sd_s_per_day": 0.0})
-    q = calibrate(*first_pass, free).report["clock_rate_sd_s_per_day"]
+    q = _calibrate(*first_pass, free).report["clock_rate_sd_s_per_day"]
     floor = 3 * max(q, CONFIG.calibrate.min_clock_rate_sd_s_per_day)
-    held = calibrate(*first_pass, with_overrides(CONFIG, calibrate={"min_clock_rate_sd_s_per_day": floor}))
+    held = _calibrate(*first_pass, with_overrides(CONFIG, calibrate={"min_clock_rate_sd_s_per_day": floor}))
     assert held.report["clock_rate_sd_s_per_day"] == pytest.approx(floor, abs=1e-5)
     assert calibrated.report["clock_rate_sd_s_per_day"] >= CONFIG.calibrate.min_clock_rate_sd_s_per_day - 1e-5
 
@@ -118,16 +125,16 @@ def _with_confident(estimate: Estimate, n: int) -> Estimate:
 
 def test_too_few_confident_arrivals_give_none(first_pass):
     estimate, record, beacons, info = first_pass
-    assert calibrate(_with_confident(estimate, MIN_ARRIVALS - 1), record, beacons, info, CONFIG) is None
-    enough = calibrate(_with_confident(estimate, MIN_ARRIVALS), record, beacons, info, CONFIG)
+    assert _calibrate(_with_confident(estimate, MIN_ARRIVALS - 1), record, beacons, info, CONFIG) is None
+    enough = _calibrate(_with_confident(estimate, MIN_ARRIVALS), record, beacons, info, CONFIG)
     assert enough is not None and enough.report["arrivals_used"] == MIN_ARRIVALS
     # Labels in ambiguous windows do not count, however sure.
     ambiguous = estimate.track.copy()
     ambiguous["ambiguous"] = True
-    assert calibrate(dataclasses.replace(estimate, track=ambiguous), record, beacons, info, CONFIG) is None
+    assert _calibrate(dataclasses.replace(estimate, track=ambiguous), record, beacons, info, CONFIG) is None
     # Confident clutter labels (no beacon) do not count either.
     clutter = estimate.labels.assign(beacon_id=None, prob=1.0)
-    assert calibrate(dataclasses.replace(estimate, labels=clutter), record, beacons, info, CONFIG) is None
+    assert _calibrate(dataclasses.replace(estimate, labels=clutter), record, beacons, info, CONFIG) is None
 
 
 @pytest.mark.xfail(
@@ -137,7 +144,7 @@ def test_too_few_confident_arrivals_give_none(first_pass):
 )
 def test_toa_sigma_is_recovered_with_multipath_arrivals():
     estimate, record, beacons, info = _first_pass(days=60, seed=0, multipath_fraction=0.1, echo_fraction=0.0)
-    fitted = calibrate(estimate, record, beacons, info, CONFIG)
+    fitted = _calibrate(estimate, record, beacons, info, CONFIG)
     assert abs(fitted.values[("model", "toa_sigma_s")] - 1.0) < 0.1
 
 
@@ -207,7 +214,7 @@ def test_the_report_gives_the_detection_of_every_beacon_fitted_heard_or_not(firs
     labels = estimate.labels.assign(
         beacon_id=estimate.labels["beacon_id"].where(estimate.labels["beacon_id"] != silenced)
     )
-    fitted = calibrate(dataclasses.replace(estimate, labels=labels), record, beacons, info, CONFIG)
+    fitted = _calibrate(dataclasses.replace(estimate, labels=labels), record, beacons, info, CONFIG)
     assert fitted is not None
     report = fitted.report["beacons"]
     assert "offset_correction_s" not in report[silenced] and "p_detect" in report[silenced]
@@ -223,7 +230,7 @@ def test_the_report_gives_the_detection_of_every_beacon_fitted_heard_or_not(firs
     assert fitted.report["sources_heard_nowhere"] == [silenced]
     assert all(report[name]["detection_heard"] > 0 for name in detected if name != silenced)
     explicit = {("model", "p_detect")}
-    kept = calibrate(dataclasses.replace(estimate, labels=labels), record, beacons, info, CONFIG, explicit=explicit)
+    kept = _calibrate(dataclasses.replace(estimate, labels=labels), record, beacons, info, CONFIG, explicit=explicit)
     assert kept is not None and kept.beacons.p_detect is None
     assert kept.report["sources_heard_nowhere"] == []
     assert not any("p_detect" in entry for entry in kept.report["beacons"].values())

@@ -18,9 +18,9 @@ from rafostrack.calibrate.association import _delay_mean, fit_association
 from rafostrack.calibrate.noise import direct_probability, fit_clutter_rate, fit_multipath
 from rafostrack.config import load_config
 from rafostrack.domain import ArrivalRecord, Window
-from rafostrack.model import horizon_s, toa_logpdf
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_mission
+from rafostrack.model.measurement import horizon_s, toa_logpdf
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_mission
 
 MODEL = load_config().model
 TRUE = dataclasses.replace(

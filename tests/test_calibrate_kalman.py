@@ -22,12 +22,13 @@ import pandas as pd
 import pytest
 from scipy.stats import chi2
 
-from rafostrack.calibrate import _hinging_sources, _problem, _without_sources, kalman
+from rafostrack.calibrate import kalman
+from rafostrack.calibrate.timing_problem import hinging_sources, timing_problem, without_sources
 from rafostrack.config import load_config
-from rafostrack.estimates import Estimate
-from rafostrack.geodesy import displace, local_offsets_km, range_m
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_mission
+from rafostrack.model.geodesy import displace, local_offsets_km, range_m
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_mission
+from rafostrack.summaries.estimates import Estimate
 
 NODE = 6  # east, north, v_east, v_north, clock, clock rate
 T0 = np.datetime64("2010-01-01T00:00", "ns")
@@ -335,7 +336,7 @@ def test_sound_speed_influence_matches_a_solve_without_each_source():
 
 @pytest.mark.parametrize("seed", [1, 3])
 def test_a_far_source_heard_once_off_its_time_is_left_out_of_the_calibration(seed):
-    """calibrate._hinging_sources: one arrival of a far source, 10 s off its true time (as
+    """calibrate.hinging_sources: one arrival of a far source, 10 s off its true time (as
     clutter near its predicted time would be), pulls the shared speed by more than its sd
     and is left out; the speed refitted without it is within 1 m/s of the fit with that
     arrival on time. On time, nothing is left out."""
@@ -346,10 +347,10 @@ def test_a_far_source_heard_once_off_its_time_is_left_out_of_the_calibration(see
         problem = _with_far_singleton(base, error)
         mid = np.zeros(problem.n_heard)
         fit = kalman.fit(problem, HYPER, _no_multipath, mid)
-        hinging = _hinging_sources(problem, fit, priors)
+        hinging = hinging_sources(problem, fit, priors)
         assert hinging.tolist() == [False] * base.n_heard + [error != 0.0]
         if hinging.any():
-            problem, mid = _without_sources(problem, mid, hinging)
+            problem, mid = without_sources(problem, mid, hinging)
             fit = kalman.fit(problem, fit.hyper, _no_multipath, mid)
         fits[error] = fit.sound_speed_m_s
     assert fits[10.0] == pytest.approx(fits[0.0], abs=1.0)
@@ -447,7 +448,7 @@ def _crossing_float(seed: int):
     at = sim.truth.set_index("time").loc[times]
     lat, lon = displace(at["lat"], at["lon"], rng.normal(0, 3, len(times)), rng.normal(0, 3, len(times)))
     track = pd.DataFrame({"time": times, "lat": lat, "lon": lon, "ambiguous": False})
-    problem, heard, mid = _problem(Estimate("smoothed", track, labels, pd.DataFrame()), beacons, info, config)
+    problem, heard, mid = timing_problem(Estimate("smoothed", track, labels, pd.DataFrame()), beacons, info, config)
     truth = {
         "offset_s": offset_error[heard],
         "drift_s_per_day": drift_error[heard],

@@ -170,6 +170,7 @@ def test_console_script_runs(mission_dir, tmp_path):
     assert float_file.stem in proc.stdout
 
 
+@pytest.mark.slow
 def test_outputs_do_not_depend_on_the_thread_count(mission_dir, tmp_path):
     """Same inputs and seed, 1 or 2 math-library threads: byte-identical Parquet files."""
     exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
@@ -355,16 +356,16 @@ def test_printed_time_includes_the_plots(sim_mission_dir, tmp_path, monkeypatch)
 
 def test_progress_bar_on_a_terminal_only(sim_mission_dir, tmp_path, monkeypatch):
     import rafostrack.plots
-    import rafostrack.progress
+    import rafostrack.run.progress
 
     monkeypatch.setattr(rafostrack.plots, "write_plots", _slow_plots(0.7))
     args = ["track", str(sim_mission_dir / "sim1.csv"), "--out", str(tmp_path)]
     quiet = CliRunner().invoke(main, args)
     assert quiet.exit_code == 0 and "drawing plots" not in quiet.output  # not a terminal: no bar
-    monkeypatch.setattr(rafostrack.progress, "is_terminal", lambda stream: True)
+    monkeypatch.setattr(rafostrack.run.progress, "is_terminal", lambda stream: True)
     shown = CliRunner().invoke(main, args)
     assert shown.exit_code == 0, shown.output
-    for phase in rafostrack.progress.PHASES:
+    for phase in rafostrack.run.progress.PHASES:
         assert phase in shown.output
     assert "sim1" in shown.output.splitlines()[-1]  # the summary line still ends the output
 

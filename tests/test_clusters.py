@@ -1,13 +1,13 @@
-"""Modes of a particle cloud (`clusters.mode_labels`) against a brute-force oracle."""
+"""Modes of a particle cloud (`filtering.modes.mode_labels`) against a brute-force oracle."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from rafostrack import clusters
-from rafostrack.clusters import mode_labels
-from rafostrack.geodesy import local_offsets_km
+from rafostrack.filtering import modes as clusters
+from rafostrack.filtering.modes import mode_labels
+from rafostrack.model.geodesy import local_offsets_km
 
 LINK_KM = 15.0
 

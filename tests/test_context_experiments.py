@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from rafostrack.experiments.context import exp_a_naive, exp_c_partial, floats_ridge, report
+from papers.context import exp_a_naive, exp_c_partial, floats_ridge, report
 
 
 def test_experiments_and_report(tmp_path):

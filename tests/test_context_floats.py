@@ -12,21 +12,21 @@ import pytest
 from click.testing import CliRunner
 from scipy.stats import norm
 
+from papers.context import floats_ridge
 from rafostrack.cli import main
 from rafostrack.config import load_config
 from rafostrack.context.floats import (
     FORBIDDEN_LOG_WEIGHT,
     SD_CLASSES_M,
     ContextFactor,
+    context_factors,
     depth_bin,
     float_network,
 )
 from rafostrack.context.grid import ContextGrid, ContextModel
 from rafostrack.domain import Particles
 from rafostrack.errors import InputError
-from rafostrack.experiments.context import floats_ridge
-from rafostrack.likelihoods import move_factors_from_config
-from rafostrack.scenarios import synthetic_scenario
+from rafostrack.sim.scenarios import synthetic_scenario
 
 
 def _settings(**context):
@@ -71,16 +71,16 @@ def test_move_factor_charges_entries_and_stays_finite():
 def test_configuration_builds_the_factors():
     beacons, floats = synthetic_scenario(days=10, rng=1)
     info = floats[0]
-    assert move_factors_from_config(load_config(), beacons, info) == ()
-    (factor,) = move_factors_from_config(load_config(overrides={"context": {"land": True}}), beacons, info)
+    assert context_factors(load_config(), beacons, info) == ()
+    (factor,) = context_factors(load_config(overrides={"context": {"land": True}}), beacons, info)
     lat, lon = np.array([info.launch_lat, -54.8]), np.array([info.launch_lon, -68.3])  # open sea; Tierra del Fuego
     assert factor.grid.cf_at(lon[:1], lat[:1])[0] == pytest.approx(0.999)
     with pytest.raises(InputError, match="needs the float's depth; expected a depth_m column"):
-        move_factors_from_config(load_config(overrides={"context": {"bathymetry": "x.nc"}}), beacons, info)
+        context_factors(load_config(overrides={"context": {"bathymetry": "x.nc"}}), beacons, info)
 
 
 def test_a_float_along_a_ridge_with_a_gap():
-    """The must-show case (`experiments.context.floats_ridge`, small): the smoothed track is
+    """The must-show case (`papers.context.floats_ridge`, small): the smoothed track is
     closer to the truth with the bathymetry constraint, and never where the sea floor is
     shallower than the float."""
     sz = floats_ridge.Sizes(repeats=4, days=66, particles=200)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from papers.context.setting import context_grid, context_network
 from rafostrack.context.grid import OUTSIDE, ContextGrid, ContextModel, label_areas
-from rafostrack.experiments.context.setting import context_grid, context_network
 
 
 def test_cells_and_outside():

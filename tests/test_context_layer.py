@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.collections import PolyCollection
 
+from papers.context import floats_ridge
 from rafostrack.config import load_config
 from rafostrack.context.floats import build_context, mission_region
-from rafostrack.experiments.context import floats_ridge
 from rafostrack.plots import figure
 from rafostrack.plots.context_layer import draw_context
-from rafostrack.scenarios import synthetic_scenario
+from rafostrack.sim.scenarios import synthetic_scenario
 
 
 def test_coastline_is_drawn_and_limits_are_kept():

@@ -17,7 +17,7 @@ from rafostrack.config import load_config
 from rafostrack.engines import ENGINES as REGISTERED
 from rafostrack.engines import Association, Engine, SimulatingEngine, bp, exact
 from rafostrack.errors import InputError
-from rafostrack.model import association_factors
+from rafostrack.model.measurement import association_factors
 
 # Every registered engine that sums the factors, built from the default configuration (the
 # registry is the list). Simulating engines (`abc`) take the window, not the factors, and
@@ -189,7 +189,7 @@ def test_exact_with_echoes_per_particle_matches_oracle(seed: int) -> None:
 
 
 def test_echo_factors_of_a_realistic_window_match_oracle() -> None:
-    """The model's echo terms (`model.echo_factors`) through the exact engine: two arrivals
+    """The model's echo terms (`model.measurement.echo_factors`) through the exact engine: two arrivals
     20 s apart near one beacon's prediction are both that beacon's, not one and clutter
     (the echo : clutter odds are e g(20.5 s) / Lambda = 0.05 * exp(-1.025) / 20 * 4200 ~ 3.8)."""
     model = dataclasses.replace(load_config().model, echo_fraction=0.05, multipath_delay_s=20.0)

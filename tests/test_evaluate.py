@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from rafostrack.domain import ArrivalRecord, Window
-from rafostrack.evaluate import (
+from rafostrack.sim.evaluate import (
     association_accuracy,
     confidently_wrong,
     label_reliability,

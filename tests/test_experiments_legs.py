@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from rafostrack.experiments.legs import fig6_interval, fig8_iterations, report, table2_overall
-from rafostrack.experiments.legs.methods import run_methods, ss_error
-from rafostrack.experiments.legs.target import NOISE_TYPES, Scenario, make_run, measurement_noise, simulate_target
+from papers.legs import fig6_interval, fig8_iterations, report, table2_overall
+from papers.legs.methods import run_methods, ss_error
+from papers.legs.target import NOISE_TYPES, Scenario, make_run, measurement_noise, simulate_target
 
 
 @pytest.mark.parametrize("kind", NOISE_TYPES)

@@ -11,18 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rafostrack.evaluate import position_errors_km
-from rafostrack.experiments.ranked import (
-    bp_vs_exact,
-    fig4_line,
-    fig5_spiral,
-    fig6b_clutter,
-    fig7_8_floats,
-    fig12_ambiguity,
-    report,
-)
-from rafostrack.experiments.ranked.setting import PaperSetting, line_xy, make_scenario, spiral_xy
-from rafostrack.experiments.runner import paper_main
+from papers.ranked import bp_vs_exact, fig4_line, fig5_spiral, fig6b_clutter, fig7_8_floats, fig12_ambiguity, report
+from papers.ranked.setting import PaperSetting, line_xy, make_scenario, spiral_xy
+from papers.runner import paper_main
+from rafostrack.sim.evaluate import position_errors_km
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -100,6 +92,7 @@ def test_trajectory_figures(module, outdir):
     assert summary["stored_per_window"] <= 4
 
 
+@pytest.mark.slow
 def test_fig6b_paired_table(outdir):
     sizes = {"repeats": 2, "particles": 40, "days": 6, "lambdas": (1.0, 4.0)}
     summary = fig6b_clutter.run(outdir, seed=3, workers=2, sizes=sizes)  # also checks the worker pool
@@ -166,7 +159,7 @@ def test_quick_mode_is_the_full_method_only_smaller():
     method needs) where the full run reproduced the paper. Quick mode now cuts replication
     (repeats, clutter levels, seeds) and record length only: every per-run setting the method's
     behaviour depends on (particles, trajectory, clutter, seeds) is the full run's."""
-    from rafostrack.experiments.ranked.trajectory import LINE, SPIRAL
+    from papers.ranked.trajectory import LINE, SPIRAL
 
     for fig in (LINE, SPIRAL):
         assert fig.quick == fig.full

@@ -1,4 +1,4 @@
-"""The forward particle filter (`rafostrack.filter`): steps, guards, memory."""
+"""The forward particle filter (`rafostrack.filtering.filter`): steps, guards, memory."""
 
 from __future__ import annotations
 
@@ -6,17 +6,18 @@ import numpy as np
 
 from rafostrack.config import load_config, with_overrides
 from rafostrack.likelihoods import RankedArrivals
-from rafostrack.method import track_record
-from rafostrack.posterior import summarise
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_mission
-from rafostrack.tracker import Tracker
+from rafostrack.problem import FloatProblem
+from rafostrack.run.method import track_record
+from rafostrack.run.one_pass import Tracker
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_mission
+from rafostrack.summaries.posterior import summarise
 
 
 def test_end_fix_is_the_last_step_and_pulls_the_cloud(sim_mission):
     sim = sim_mission.floats[0]
     config = with_overrides(load_config(), filter={"particles": 300})
-    run = Tracker.from_config(config, sim_mission.beacons, sim.info).run_filter(sim.record)
+    run = Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, config)).run_filter(sim.record)
     assert run.steps[-1].window is None and run.steps[-1].cloud.time == sim.info.end_time
     assert sum(s.window is not None for s in run.steps) == len(sim.record.windows)
     last = summarise(run.steps[-1].cloud.lat, run.steps[-1].cloud.lon, run.steps[-1].cloud.weights)
@@ -50,7 +51,7 @@ def test_non_finite_likelihoods_are_dropped_or_skipped_with_a_warning(sim_missio
         return type(evidence)(loglik, evidence.beacon_index, evidence.p_match, evidence.warnings)
 
     monkeypatch.setattr(RankedArrivals, "evaluate", broken)
-    out = track_record(sim_mission.beacons, sim.info, config, sim.record)
+    out = track_record(FloatProblem(sim_mission.beacons, sim.info, config), sim.record)
     assert len(out.warnings) == 2
     assert "skipped" in out.warnings[0] and "dropped" in out.warnings[1]
     assert np.isnan(out.track["loglik"].iloc[4])
@@ -69,7 +70,7 @@ def test_filter_only_memory_does_not_grow_with_the_record():
     history_bytes = len(sim.record.windows) * config.filter.particles * 5 * 8
     tracemalloc.start()
     try:
-        track_record(beacons, sim.info, config, sim.record)
+        track_record(FloatProblem(beacons, sim.info, config), sim.record)
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from geographiclib.geodesic import Geodesic
 
-from rafostrack.geodesy import displace, local_offsets_km, range_m, range_matrix_m, wrap_lon
+from rafostrack.model.geodesy import displace, local_offsets_km, range_m, range_matrix_m, wrap_lon
 
 
 def test_ranges_match_geographiclib_within_10m_up_to_3000km():

@@ -1,4 +1,4 @@
-"""The proposal guided by the window (`rafostrack.guided`): its Gaussian summary, its
+"""The proposal guided by the window (`rafostrack.filtering.guided`): its Gaussian summary, its
 density against a dense product of Gaussians, its optimality, and a filter that uses it."""
 
 from __future__ import annotations
@@ -11,12 +11,13 @@ from scipy.stats import multivariate_normal
 
 from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import Particles
-from rafostrack.estimates import build_estimate
-from rafostrack.geodesy import local_offsets_km
-from rafostrack.guided import GuidedDrift, LikelihoodSummary, summarise_likelihood
+from rafostrack.filtering.guided import GuidedDrift, LikelihoodSummary, summarise_likelihood
+from rafostrack.model.geodesy import local_offsets_km
 from rafostrack.motion.ou import IntegratedOU
 from rafostrack.motion.random_walk import RandomWalk
-from rafostrack.tracker import Tracker
+from rafostrack.problem import FloatProblem
+from rafostrack.run.one_pass import Tracker
+from rafostrack.summaries.estimates import build_estimate
 
 CENTRE = (-55.02, -59.95)  # the Gaussian likelihood's peak
 PRECISION = np.array([[1 / 1.5**2, 0.1], [0.1, 1.0]])  # 1/km^2: sd 1.5 km east, 1 km north, correlated
@@ -137,8 +138,8 @@ def test_guiding_leaves_the_posterior_unchanged_and_raises_the_ess(sim_mission):
     )
     runs, tracks = [], []
     for fraction in (0.0, 0.5):
-        tracker = Tracker.from_config(
-            with_overrides(config, filter={"guided_fraction": fraction}), sim_mission.beacons, sim.info
+        tracker = Tracker.from_problem(
+            FloatProblem(sim_mission.beacons, sim.info, with_overrides(config, filter={"guided_fraction": fraction}))
         )
         run = tracker.run_filter(record)
         runs.append(run)

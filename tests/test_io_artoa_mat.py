@@ -64,3 +64,24 @@ def test_window_rows_layout_and_errors(quality_mission, tmp_path):
     savemat(path, {"TOA": toa, "TOA_SEL": sel[:1], "TOA_DATE": np.array([day0]), "SOSOREF": names})
     with pytest.raises(InputError, match="differ in shape"):
         read_arrivals(path, info, beacons, Warnings())
+
+
+def test_warnings_are_the_csv_readers_naming_the_toa_entry(quality_mission, tmp_path):
+    from scipy.io import savemat
+
+    beacons = read_beacons(quality_mission / "beacons.csv")
+    info = read_floats(quality_mission / "floats.csv", load_config().model)["sim1"]
+    day0 = (info.launch_time - np.datetime64("1968-05-23T12:00", "ns")) / np.timedelta64(1, "D")
+    names = np.empty((1, 1), dtype=object)
+    names[0, 0] = str(beacons.beacon_id[0])
+    path = tmp_path / "f.itm"
+    toa = np.array([[500.0, info.window_s + 10.0, 500.0]])  # one beyond the window, one repeated
+    savemat(path, {"TOA": toa, "TOA_SEL": np.ones_like(toa), "TOA_DATE": np.array([day0 + 1]), "SOSOREF": names})
+    warnings = Warnings()
+    record = read_arrivals(path, info, beacons, warnings)
+    assert [w.toa_s.tolist() for w in record.windows] == [[500.0]]
+    assert f"{path}: 1 duplicate entry(s) (same time and TOA) dropped (first at TOA entry 3)" in warnings.messages
+    assert (
+        f"{path}: 1 TOA(s) outside the window [0, {info.window_s:g}] s dropped (0 negative, 1 beyond window_s; "
+        f"first at TOA entry 2: TOA = {info.window_s + 10.0:g})"
+    ) in warnings.messages

@@ -1,6 +1,6 @@
 """The CSV mission reader (`rafostrack.io.csv_mission`): beacons.csv, floats.csv, arrival files.
 
-One test per row of the README's "Input checks" table, then property-based tests (random and
+One test per row of the "Input checks" table of docs/user-guide.md, then property-based tests (random and
 mutated CSV: only `InputError` may escape, with a one-line message) and a 1,000,000-row float
 file in bounded memory. `pytest -m reliability` runs the hardening tests alone.
 """
@@ -33,7 +33,8 @@ from support import (
 
 from rafostrack.cli import main
 from rafostrack.errors import InputError, Warnings
-from rafostrack.io.csv_mission import USABLE_GAP_DAYS, read_arrivals, read_beacons, read_floats
+from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
+from rafostrack.io.records import USABLE_GAP_DAYS
 
 try:
     from hypothesis import given
@@ -242,6 +243,7 @@ _MEMORY_SCRIPT = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_million_row_float_file_in_bounded_memory(tmp_path):
     """1,000,000 rows (250,000 two-hourly windows of 4 TOAs, 28 MB) read and validated in a
     fresh process: peak RSS 0.40 GB (0.10 GB of it before reading), about 2 s."""
@@ -268,7 +270,7 @@ def test_million_row_float_file_in_bounded_memory(tmp_path):
     assert stats["peak_mb"] < 1024, stats
 
 
-def test_half_given_end_fix_is_anerror_of(tmp_path):
+def test_half_given_end_fix_is_an_error(tmp_path):
     text = (
         "float_id,launch_time,launch_lat,launch_lon,end_time,end_lat,end_lon\nf1,2009-01-01,-57,-98,2009-06-01,-58,\n"
     )
@@ -433,6 +435,7 @@ def _finite_fields(obj) -> bool:
     return all(np.isfinite(np.asarray(v)[~np.isnan(np.asarray(v))]).all() for v in values)
 
 
+@pytest.mark.slow
 def test_every_column_against_every_bad_cell(tmp_path):
     """Exhaustive grid: each column of a valid file replaced by each odd value. Only
     InputError (one line, naming the file, line and column) escapes; what is accepted is finite."""

@@ -1,6 +1,7 @@
 """Strict CSV reading (`rafostrack.io.csv_table`): structure errors name the file and line.
 
-Rows of the README's "Input checks" table; `pytest -m reliability` runs them with the other hardening tests.
+Rows of the "Input checks" table of docs/user-guide.md; `pytest -m reliability` runs them with the other
+hardening tests.
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ def test_bom_and_crlf_are_accepted(tmp_path):
         assert not warnings.messages
 
 
-def test_semicolon_separated_file_is_a_clearerror_of(tmp_path):
+def test_semicolon_separated_file_is_a_clear_error(tmp_path):
     message = error_of(read_beacons, write(tmp_path / "beacons.csv", BEACONS.replace(",", ";")))
     assert "beacons.csv: line 1: columns are separated by ';'; expected ',' (comma-separated CSV" in message
     message = error_of(read_beacons, write(tmp_path / "beacons.csv", BEACONS.replace(",", "\t")))

@@ -1,4 +1,4 @@
-"""Outputs beyond Parquet (issue 14 item 8): CSV, CF NetCDF, ARTOA .rfc; units in Parquet."""
+"""Outputs beyond Parquet: CSV, CF NetCDF, ARTOA .rfc; units in Parquet."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from rafostrack.cli import main
 from rafostrack.io.columns import TABLES
 from rafostrack.io.output_formats import RFC_COLUMNS, RFC_WIDTH, rafos_day, read_rfc
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+USER_GUIDE = Path(__file__).resolve().parents[1] / "docs" / "user-guide.md"
 
 
 @pytest.fixture(scope="module")
@@ -107,12 +107,12 @@ def test_unknown_format_is_one_line(sim_mission_dir, tmp_path):
     assert "unknown output format 'netcfd' (did you mean 'netcdf'?)" in result.output
 
 
-def test_readme_documents_every_output_column_with_units():
-    text = README.read_text(encoding="utf-8")
+def test_user_guide_documents_every_output_column_with_units():
+    text = USER_GUIDE.read_text(encoding="utf-8")
     section = text[text.index("### Output columns") :]
     section = section[: section.index("\n## ")]
     for table, columns in TABLES.items():
         for name, spec in columns.items():
             row = re.search(rf"^\| `{table}` \| `{name}` \| ([^|]*) \|", section, re.MULTILINE)
-            assert row, f"{table}.{name} not in README's Output columns"
+            assert row, f"{table}.{name} not in the user guide's Output columns"
             assert row.group(1).strip() == (f"`{spec.units}`" if spec.units else "—"), (table, name)

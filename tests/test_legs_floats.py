@@ -12,9 +12,9 @@ from support import simulated_mission_dir
 
 from rafostrack.cli import main
 from rafostrack.config import load_config
-from rafostrack.estimates import TRACK_COLUMNS
-from rafostrack.evaluate import position_errors_km
 from rafostrack.legs.floats import leg_prior
+from rafostrack.sim.evaluate import position_errors_km
+from rafostrack.summaries.estimates import TRACK_COLUMNS
 
 
 @pytest.fixture(scope="module")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rafostrack.geodesy import local_offsets_km, range_m
 from rafostrack.legs.plane import Plane
+from rafostrack.model.geodesy import local_offsets_km, range_m
 
 
 def test_round_trip_and_distances_from_the_centre():

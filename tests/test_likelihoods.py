@@ -8,13 +8,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rafostrack import model as m
 from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import Particles
 from rafostrack.engines import exact
-from rafostrack.evaluate import position_errors_km
 from rafostrack.likelihoods import RankedArrivals, fix_loglik
-from rafostrack.method import track_record
+from rafostrack.model import measurement as m
+from rafostrack.problem import FloatProblem
+from rafostrack.run.method import track_record
+from rafostrack.sim.evaluate import position_errors_km
 
 
 def test_fix_loglik_is_a_normalised_2d_gaussian():
@@ -27,7 +28,7 @@ def test_fix_loglik_is_a_normalised_2d_gaussian():
 @pytest.mark.parametrize("ranked", [True, False])
 def test_ranked_component_is_the_model_factors_summed_by_the_engine(sim_mission, ranked):
     """The component adds nothing of its own: log p = K log Lambda - Lambda h + log Z, with Z
-    from the exact engine on `model.association_factors`."""
+    from the exact engine on `model.measurement.association_factors`."""
     sim = sim_mission.floats[0]
     model = load_config().model
     window = next(w for w in sim.record.windows if w.n_signals >= 3)
@@ -71,7 +72,7 @@ def test_a_wild_hand_label_is_widened_not_collapsed_onto(sim_mission):
         smoother={"enabled": False},
         calibrate={"enabled": False},  # one pass with the configured model: one wild label, one warning
     )
-    out = track_record(sim_mission.beacons, sim.info, config, record)
+    out = track_record(FloatProblem(sim_mission.beacons, sim.info, config), record)
     assert len(out.warnings) == 1 and "sd was widened" in out.warnings[0]
     assert np.all(np.isfinite(out.track[["lat", "lon", "sd_km"]].to_numpy()))
     assert np.sqrt(np.mean(position_errors_km(out.track, sim.truth) ** 2)) < 6.0
@@ -81,6 +82,6 @@ def test_an_end_fix_far_from_every_particle_is_widened(sim_mission):
     sim = sim_mission.floats[0]
     info = dataclasses.replace(sim.info, end_lat=sim.info.end_lat + 2.0)  # ~220 km off
     config = with_overrides(load_config(), filter={"particles": 300})
-    out = track_record(sim_mission.beacons, info, config, sim.record)
+    out = track_record(FloatProblem(sim_mission.beacons, info, config), sim.record)
     assert any("end fix" in w and "widened" in w for w in out.warnings)
     assert np.all(np.isfinite(out.track[["lat", "lon", "sd_km", "smaj_km"]].to_numpy()))

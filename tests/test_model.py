@@ -14,10 +14,10 @@ import pytest
 from geographiclib.geodesic import Geodesic
 from scipy import integrate, stats
 
-from rafostrack import model as m
 from rafostrack.config import load_config
 from rafostrack.domain import BeaconTable, FloatInfo
 from rafostrack.engines import exact
+from rafostrack.model import measurement as m
 
 NAT = np.datetime64("NaT", "ns")
 
@@ -134,6 +134,7 @@ def test_toa_density_and_cdf_agree(eps, shape):
     assert m.toa_cdf(np.array(7.0), model) == pytest.approx(integrate.quad(density, -50, 7.0, limit=200)[0], abs=1e-8)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shape", [1, 2])
 @pytest.mark.parametrize(("sigma", "eps", "tau"), [(2.0, 0.1, 20.0), (1.0, 0.3, 5.0), (5.0, 0.2, 8.0)])
 def test_toa_density_is_the_gaussian_delay_convolution(sigma, eps, tau, shape):

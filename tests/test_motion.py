@@ -14,7 +14,7 @@ import pytest
 
 from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import Particles
-from rafostrack.geodesy import local_offsets_km
+from rafostrack.model.geodesy import local_offsets_km
 from rafostrack.motion import MOTION_MODELS, IntegratedOU, MotionModel, RandomWalk, motion_from_config
 
 LAT0, LON0 = -57.0, -95.0

@@ -1,4 +1,4 @@
-"""`rafostrack.pipeline`: one float end to end, reproducible to the byte."""
+"""`rafostrack.run.one_float`: one float end to end, reproducible to the byte."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def test_wild_toa_window_stays_finite(sim_mission_dir, tmp_path):
     assert np.isfinite(track[["lat", "lon", "sd_km", "ess", "loglik"]].to_numpy()).all()
 
 
-def test_same_inputs_sameparquet_bytes(sim_mission_dir, tmp_path):
+def test_same_inputs_give_the_same_parquet_bytes(sim_mission_dir, tmp_path):
     args = ["track", str(sim_mission_dir / "sim1.csv"), "--no-plots", "--particles", "200", "--seed", "11"]
     for name in ("a", "b"):
         result = CliRunner().invoke(main, [*args, "--out", str(tmp_path / name)])

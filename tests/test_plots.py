@@ -11,9 +11,9 @@ import pytest
 
 from rafostrack.config import load_config
 from rafostrack.domain import BeaconTable, FloatInfo
-from rafostrack.estimates import MODE_COLUMNS, Estimate
-from rafostrack.model import predicted_arrivals
+from rafostrack.model.measurement import predicted_arrivals
 from rafostrack.plots import beacon_colors, write_plots
+from rafostrack.summaries.estimates import MODE_COLUMNS, Estimate
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 NAMES = ["track.png", "arrivals.png", "uncertainty.png"]

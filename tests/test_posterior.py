@@ -1,11 +1,11 @@
-"""Summaries of weighted clouds (`rafostrack.posterior`)."""
+"""Summaries of weighted clouds (`rafostrack.summaries.posterior`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from rafostrack.posterior import summarise, two_modes
+from rafostrack.summaries.posterior import summarise, two_modes
 
 
 def test_summarise_weighted_mean_and_spread():

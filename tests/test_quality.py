@@ -1,4 +1,4 @@
-"""Correlation height as source-vs-clutter evidence (`rafostrack.quality`)."""
+"""Correlation height as source-vs-clutter evidence (`rafostrack.likelihoods.quality`)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from rafostrack import model as m
 from rafostrack.config import load_config, with_overrides
 from rafostrack.engines import exact
-from rafostrack.quality import fit_quality, quality_log_ratio
+from rafostrack.likelihoods.quality import fit_quality, quality_log_ratio
+from rafostrack.model import measurement as m
 
 ON = dataclasses.replace(load_config().quality, enabled=True)
 

@@ -11,13 +11,14 @@ import pytest
 
 from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import ArrivalRecord, BeaconTable, FloatInfo
-from rafostrack.estimates import build_estimate
-from rafostrack.evaluate import position_errors_km
-from rafostrack.geodesy import displace, local_offsets_km
-from rafostrack.recovery import RecoverySettings
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_arrivals, simulate_drift
-from rafostrack.tracker import Tracker
+from rafostrack.filtering.recovery import RecoverySettings
+from rafostrack.model.geodesy import displace, local_offsets_km
+from rafostrack.problem import FloatProblem
+from rafostrack.run.one_pass import Tracker
+from rafostrack.sim.evaluate import position_errors_km
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_arrivals, simulate_drift
+from rafostrack.summaries.estimates import build_estimate
 
 DAYS = 50
 GAP_DAYS = (25, 30)  # no windows on days 25..29
@@ -67,7 +68,7 @@ def test_a_60_km_jump_in_a_gap_is_recovered_at_the_first_window_and_flagged(seed
     after_gap = next(w.time for w in record.windows if (w.time - info.launch_time) / DAY >= GAP_DAYS[1])
     results = {}
     for recovery in (True, False):
-        out = Tracker.from_config(_config(recovery), beacons, info).track(record)
+        out = Tracker.from_problem(FloatProblem(beacons, info, _config(recovery))).track(record)
         track = out.estimate.track
         rows = track["time"].to_numpy(dtype="datetime64[ns]") >= after_gap
         results[recovery] = (position_errors_km(track, truth)[rows][:10], track["status"].to_numpy()[rows], out)
@@ -88,7 +89,7 @@ def test_reseeding_when_nothing_is_lost_leaves_the_posterior_unchanged():
     beacons, info, record, truth = _mission(7, jump_km=0.0)
     record = dataclasses.replace(record, windows=record.windows[:25])
     config = with_overrides(_config(False), filter={"particles": 2000})
-    plain = Tracker.from_config(config, beacons, info)
+    plain = Tracker.from_problem(FloatProblem(beacons, info, config))
     always = dataclasses.replace(plain, recovery=RecoverySettings(min_gain_nats=-np.inf, check_every=1))
     runs = [tracker.run_filter(record) for tracker in (plain, always)]
     assert runs[0].n_reseeds == 0 and runs[1].n_reseeds == sum(w.n_signals > 0 for w in record.windows)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from rafostrack.resampling import ess, log_sum_exp, normalise_log_weights, quantile_points, systematic
+from rafostrack.filtering.resampling import ess, log_sum_exp, normalise_log_weights, quantile_points, systematic
 
 
 def test_systematic_copies_each_particle_floor_or_ceil_times():

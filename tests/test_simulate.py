@@ -12,12 +12,12 @@ import pytest
 from rafostrack.config import ModelConfig, load_config
 from rafostrack.domain import BeaconTable, FloatInfo
 from rafostrack.errors import Warnings
-from rafostrack.geodesy import local_offsets_km, range_m
 from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
-from rafostrack.io.mission_writer import write_mission
-from rafostrack.model import predicted_arrivals
-from rafostrack.scenarios import dimes_scenario, synthetic_scenario
-from rafostrack.simulate import SimulatedMission, simulate_drift, simulate_mission, summarize
+from rafostrack.model.geodesy import local_offsets_km, range_m
+from rafostrack.model.measurement import predicted_arrivals
+from rafostrack.sim.mission_writer import write_mission
+from rafostrack.sim.scenarios import dimes_scenario, synthetic_scenario
+from rafostrack.sim.simulate import SimulatedMission, simulate_drift, simulate_mission, summarize
 
 # The simulator's checks below are of one arrival per detected source: echoes off (they have
 # their own test).

@@ -11,15 +11,16 @@ from support import LINEAR_GAUSSIAN_CASES, rts_smoother
 
 from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import BeaconTable, Cloud, FloatInfo, Particles
-from rafostrack.evaluate import inside_ellipse, position_errors_km, true_labels
-from rafostrack.geodesy import displace, local_offsets_km, range_m
-from rafostrack.method import track_record
+from rafostrack.filtering.resampling import normalise_log_weights, systematic
+from rafostrack.model.geodesy import displace, local_offsets_km, range_m
 from rafostrack.motion import MOTION_MODELS
-from rafostrack.posterior import ELLIPSE_95_SCALE, summarise
-from rafostrack.resampling import normalise_log_weights, systematic
-from rafostrack.scenarios import synthetic_scenario
-from rafostrack.simulate import simulate_arrivals, simulate_mission
-from rafostrack.smoother import smooth
+from rafostrack.problem import FloatProblem
+from rafostrack.run.method import track_record
+from rafostrack.sim.evaluate import inside_ellipse, position_errors_km, true_labels
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_arrivals, simulate_mission
+from rafostrack.smoothing.ffbsm import smooth
+from rafostrack.summaries.posterior import ELLIPSE_95_SCALE, summarise
 
 LAT0, LON0 = -58.0, -90.0
 T0 = np.datetime64("2010-01-01T00:00", "ns")
@@ -96,7 +97,7 @@ def test_smoothing_improves_on_filtering_and_is_calibrated():
     rmse = {"filtered": [], "smoothed": []}
     covered, right, prob = [], [], []
     for sim in mission.floats:
-        out = track_record(beacons, sim.info, config, sim.record, also_filtered=True)
+        out = track_record(FloatProblem(beacons, sim.info, config), sim.record, also_filtered=True)
         for est in (out.filtered, out.estimate):
             rmse[est.kind].append(np.sqrt(np.mean(position_errors_km(est.track, sim.truth) ** 2)))
         covered.extend(inside_ellipse(out.estimate.track, sim.truth, ELLIPSE_95_SCALE))
@@ -150,7 +151,7 @@ def test_two_beacon_stretch_is_flagged_ambiguous():
     )
     model = dataclasses.replace(config.model, p_detect=0.999999)  # simulate: every source heard
     record, _ = simulate_arrivals(beacons, info, model, truth, np.random.default_rng(5), days=40)
-    out = track_record(beacons, info, config, record)
+    out = track_record(FloatProblem(beacons, info, config), record)
     track = out.track.set_index("time")
     day = (track.index - pd.Timestamp(T0)).days
     assert not track["ambiguous"][day <= 18].any()  # three or four clean signals

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from rafostrack.smoother_kernel import BLOCK, MIXTURE_TOL, backward_weights, log_mixture_density
+from rafostrack.smoothing.ffbsm_kernel import BLOCK, MIXTURE_TOL, backward_weights, log_mixture_density
 
 
 def _mixture(rng: np.random.Generator, n_i: int, n_j: int, far: float):

@@ -1,4 +1,4 @@
-"""The stress scenario (`rafostrack.stress`): reproducible, each knob doing what it says, and
+"""The stress scenario (`rafostrack.sim.stress`): reproducible, each knob doing what it says, and
 the events it reports matching the record it writes."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rafostrack.stress import DAY_NS, StressConfig, simulate_stress, with_knobs
+from rafostrack.sim.stress import DAY_NS, StressConfig, simulate_stress, with_knobs
 
 QUIET = StressConfig(
     days=60, gaps=False, fading=False, bad_propagation=False, multipath=False, outage=False, burst_prob=0.0

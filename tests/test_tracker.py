@@ -1,4 +1,4 @@
-"""The assembled tracker (`rafostrack.tracker`) on simulated missions: labels and positions
+"""The assembled tracker (`rafostrack.run.one_pass`) on simulated missions: labels and positions
 against truth, reproducibility, calibration, and every registered component."""
 
 from __future__ import annotations
@@ -10,15 +10,16 @@ import pytest
 
 from rafostrack.config import METHODS, load_config, method_overrides, with_overrides
 from rafostrack.engines import ENGINES
-from rafostrack.estimates import build_estimate
-from rafostrack.evaluate import association_accuracy, position_errors_km
+from rafostrack.filtering.resampling import RESAMPLERS
 from rafostrack.likelihoods import ARRIVAL_LIKELIHOODS
-from rafostrack.method import track_record
 from rafostrack.motion import MOTION_MODELS
-from rafostrack.resampling import RESAMPLERS
-from rafostrack.smoother import MAX_COLUMNS, smooth
-from rafostrack.tracker import Tracker
-from rafostrack.two_filter import JOIN_COLUMNS
+from rafostrack.problem import FloatProblem
+from rafostrack.run.method import track_record
+from rafostrack.run.one_pass import Tracker
+from rafostrack.sim.evaluate import association_accuracy, position_errors_km
+from rafostrack.smoothing.ffbsm import MAX_COLUMNS, smooth
+from rafostrack.smoothing.two_filter import JOIN_COLUMNS
+from rafostrack.summaries.estimates import build_estimate
 
 
 def _run(mission, method, particles=500, seed=0):
@@ -29,7 +30,7 @@ def _run(mission, method, particles=500, seed=0):
         smoother={"enabled": False},
     )
     sim = mission.floats[0]
-    return sim, track_record(mission.beacons, sim.info, config, sim.record)
+    return sim, track_record(FloatProblem(mission.beacons, sim.info, config), sim.record)
 
 
 @pytest.mark.parametrize("method", ["exact", "bp", "unranked"])
@@ -91,7 +92,7 @@ def test_every_registered_component_assembles_and_tracks(sim_mission, motion, li
         motion={"model": motion},
         filter={"likelihood": likelihood, "engine": engine, "resampling": resampling, "particles": 100},
     )
-    tracker = Tracker.from_config(config, sim_mission.beacons, sim.info)
+    tracker = Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, config))
     assert tracker.motion.name == motion and tracker.settings.resampler is RESAMPLERS[resampling]
     record = type(sim.record)(sim.record.float_id, sim.record.path, sim.record.windows[:10])
     out = tracker.track(record)
@@ -120,7 +121,7 @@ def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_
         load_config(), filter={"particles": MAX_COLUMNS + 500, "seed": 1}, smoother={"two_filter": two_filter}
     )
     tracker = dataclasses.replace(
-        Tracker.from_config(config, sim_mission.beacons, sim.info), ffbsm_columns=ffbsm_columns
+        Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, config)), ffbsm_columns=ffbsm_columns
     )
     columns = JOIN_COLUMNS if two_filter else ffbsm_columns
     kept = tracker._run_kept(record, columns)

@@ -8,12 +8,12 @@ import pytest
 from support import LINEAR_GAUSSIAN_CASES, rts_smoother
 
 from rafostrack.domain import Cloud, Particles
-from rafostrack.geodesy import displace, local_offsets_km
+from rafostrack.filtering.resampling import normalise_log_weights, systematic
+from rafostrack.model.geodesy import displace, local_offsets_km
 from rafostrack.motion import MOTION_MODELS, JumpMixture, MotionModel, RandomWalk
-from rafostrack.posterior import summarise
-from rafostrack.resampling import normalise_log_weights, systematic
-from rafostrack.smoother import smooth
-from rafostrack.two_filter import forward_view, two_filter_smooth
+from rafostrack.smoothing.ffbsm import smooth
+from rafostrack.smoothing.two_filter import forward_view, two_filter_smooth
+from rafostrack.summaries.posterior import summarise
 
 LAT0, LON0 = -58.0, -90.0
 T0 = np.datetime64("2010-01-01T00:00", "ns")

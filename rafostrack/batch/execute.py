@@ -40,7 +40,7 @@ from .plan import FAILED, MANIFEST, MANIFEST_FORMAT, PROCESSED, FloatOutcome, Fl
 def process_float(task: FloatTask) -> FloatOutcome:
     """Track one float into a temporary sibling directory, write its manifest last, then swap
     it into place. Never raises: a failure is returned as an outcome with a one-line reason."""
-    from ..pipeline import TrackInputs, track_float
+    from ..run.one_float import TrackInputs, track_float
 
     started = time.perf_counter()
     planned_version = task.components.get("rafostrack_version", __version__)

@@ -4,8 +4,9 @@ Guarantees:
 
 - Each float gets a key, the SHA-256 over its arrival file's bytes, the bytes of its
   mission's `beacons.csv`, its own row of `floats.csv`, the effective configuration (every
-  layer, loaded as `track` loads it), the package version and the plots option. Paths are
-  not hashed: an output tree can be moved with its inputs.
+  layer, loaded as `track` loads it: the values and which keys a layer sets, since a key
+  the user set is not calibrated, `Config.explicit`), the package version and the plots
+  option. Paths are not hashed: an output tree can be moved with its inputs.
 - A float is skipped only when its output directory holds a `batch-manifest.json` with the
   same key and every file the manifest lists is there with its recorded size. Otherwise it
   becomes a task whose `why` names what changed (`float file changed`, `beacons.csv
@@ -25,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..config import load_config
+from ..config import Config, load_config
 from ..errors import InputError
 from ..io.writers import file_digest
 from .discover import Mission
@@ -134,6 +135,18 @@ def _why(out_dir: Path, key: str, components: dict[str, Any], force: bool) -> st
     return "forced" if force else None
 
 
+@dataclass(frozen=True)
+class _Batch:
+    """What every float of one plan shares: OUT, the batch's config layers and options."""
+
+    out: Path
+    config_files: tuple[Path, ...]
+    overrides: dict[str, dict[str, Any]]
+    plots: bool
+    force: bool
+    run_id: str
+
+
 def plan(
     missions: Sequence[Mission],
     out: Path,
@@ -146,68 +159,80 @@ def plan(
 ) -> tuple[list[FloatTask], list[FloatOutcome]]:
     """Split every float into work to do (tasks) and outcomes known now (skipped, or failed
     before running: unreadable floats.csv, bad mission config, missing arrival file)."""
-    from ..pipeline import TrackInputs
-
-    overrides = overrides or {}
-    out = Path(out).resolve()
+    batch = _Batch(Path(out).resolve(), tuple(config_files), overrides or {}, plots, force, run_id)
     tasks: list[FloatTask] = []
     known: list[FloatOutcome] = []
     for mission in missions:
-        mission_out = out / mission.name
-        try:
-            beacons_sha = file_digest(mission.path / "beacons.csv")
-        except OSError as exc:
-            beacons_sha, beacons_error = "", f"{mission.path / 'beacons.csv'}: cannot read: {exc.strerror or exc}"
-        else:
-            beacons_error = ""
+        beacons_sha, beacons_error = _beacons_digest(mission)
         for float_id, row in sorted(mission.rows.items()):
-            float_path = mission.path / f"{float_id}.csv"
-            out_dir = mission_out / float_id
-            fail = _known_failure(mission, float_id, float_path, beacons_error)
-            if fail is not None:
-                status, reason = fail
-                known.append(FloatOutcome(mission.name, float_id, status, reason))
-                continue
-            inputs = TrackInputs(float_path=float_path, config_files=tuple(config_files), overrides=overrides)
-            try:
-                config = load_config(inputs.config_layers(), inputs.overrides).to_dict()
-                float_sha = file_digest(float_path)
-            except InputError as exc:
-                known.append(FloatOutcome(mission.name, float_id, FAILED, str(exc)))
-                continue
-            except OSError as exc:
-                known.append(FloatOutcome(mission.name, float_id, FAILED, f"{float_path}: {exc.strerror or exc}"))
-                continue
-            components = {
-                "float_file_sha256": float_sha,
-                "beacons_sha256": beacons_sha,
-                "floats_row_sha256": _sha256_json(row),
-                "config_sha256": _sha256_json(config),
-                "rafostrack_version": __version__,
-                "plots": bool(plots),
-            }
-            key = _sha256_json({"format": MANIFEST_FORMAT, **components})
-            why = _why(out_dir, key, components, force)
-            if why is None:
-                known.append(FloatOutcome(mission.name, float_id, SKIPPED, "unchanged", output=str(out_dir)))
-                continue
-            tasks.append(
-                FloatTask(
-                    mission=mission.name,
-                    float_id=float_id,
-                    float_path=float_path,
-                    out_dir=out_dir,
-                    config_files=tuple(config_files),
-                    overrides=overrides,
-                    plots=plots,
-                    key=key,
-                    components=components,
-                    why=why,
-                    lock_info_path=out / LOCK_INFO_NAME,
-                    run_id=run_id,
-                )
-            )
+            decided = _plan_float(mission, float_id, row, beacons_sha, beacons_error, batch)
+            if isinstance(decided, FloatTask):
+                tasks.append(decided)
+            else:
+                known.append(decided)
     return tasks, known
+
+
+def _beacons_digest(mission: Mission) -> tuple[str, str]:
+    """The SHA-256 of the mission's beacons.csv and "", or "" and why it cannot be read."""
+    try:
+        return file_digest(mission.path / "beacons.csv"), ""
+    except OSError as exc:
+        return "", f"{mission.path / 'beacons.csv'}: cannot read: {exc.strerror or exc}"
+
+
+def _plan_float(
+    mission: Mission, float_id: str, row: dict[str, str], beacons_sha: str, beacons_error: str, batch: _Batch
+) -> FloatTask | FloatOutcome:
+    """One float's task (with its key and why it is tracked), or its outcome known now."""
+    from ..run.one_float import TrackInputs
+
+    float_path = mission.path / f"{float_id}.csv"
+    out_dir = batch.out / mission.name / float_id
+    fail = _known_failure(mission, float_id, float_path, beacons_error)
+    if fail is not None:
+        status, reason = fail
+        return FloatOutcome(mission.name, float_id, status, reason)
+    inputs = TrackInputs(float_path=float_path, config_files=batch.config_files, overrides=batch.overrides)
+    try:
+        config = load_config(inputs.config_layers(), inputs.overrides)
+        float_sha = file_digest(float_path)
+    except InputError as exc:
+        return FloatOutcome(mission.name, float_id, FAILED, str(exc))
+    except OSError as exc:
+        return FloatOutcome(mission.name, float_id, FAILED, f"{float_path}: {exc.strerror or exc}")
+    components = {
+        "float_file_sha256": float_sha,
+        "beacons_sha256": beacons_sha,
+        "floats_row_sha256": _sha256_json(row),
+        "config_sha256": _sha256_json(config_identity(config)),
+        "rafostrack_version": __version__,
+        "plots": bool(batch.plots),
+    }
+    key = _sha256_json({"format": MANIFEST_FORMAT, **components})
+    why = _why(out_dir, key, components, batch.force)
+    if why is None:
+        return FloatOutcome(mission.name, float_id, SKIPPED, "unchanged", output=str(out_dir))
+    return FloatTask(
+        mission=mission.name,
+        float_id=float_id,
+        float_path=float_path,
+        out_dir=out_dir,
+        config_files=batch.config_files,
+        overrides=batch.overrides,
+        plots=batch.plots,
+        key=key,
+        components=components,
+        why=why,
+        lock_info_path=batch.out / LOCK_INFO_NAME,
+        run_id=batch.run_id,
+    )
+
+
+def config_identity(config: Config) -> dict[str, Any]:
+    """What of a configuration decides a float's outputs: every value, and the keys the user
+    set (calibration keeps those as set, so setting a key to its default value matters)."""
+    return {"values": config.to_dict(), "explicit": sorted(f"[{s}] {k}" for s, k in config.explicit)}
 
 
 def _known_failure(mission: Mission, float_id: str, float_path: Path, beacons_error: str) -> tuple[str, str] | None:

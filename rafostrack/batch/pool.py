@@ -38,9 +38,9 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
-from ..workers import environment, single_threaded_math
 from .execute import one_line, process_float
 from .plan import FAILED, FloatOutcome, FloatTask
+from .workers import environment, single_threaded_math
 
 PACKAGE_DIR = str(Path(__file__).resolve().parents[1])  # the rafostrack this process runs
 
@@ -177,7 +177,7 @@ def _mp_context() -> multiprocessing.context.BaseContext:
     writing end must stay in this process only."""
     if "forkserver" in multiprocessing.get_all_start_methods():
         ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["rafostrack.batch.pool", "rafostrack.pipeline"])
+        ctx.set_forkserver_preload(["rafostrack.batch.pool", "rafostrack.run.one_float"])
         return ctx
     return multiprocessing.get_context()
 

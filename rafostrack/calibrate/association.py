@@ -10,7 +10,7 @@ E-step: per window, the exact association marginals at x (`engines.exact`: P(sig
     beacon i's first arrival), P(... its echo), P(clutter); one engine call for all the
     windows with the same numbers of beacons and signals), the first arrival split into
     direct and delayed by the error density's components, P(delayed | r) = eps f_d(r) / f(r)
-    (`model.toa_logpdf`), r = T_j - mu_i; and the delay's posterior mean given it was
+    (`model.measurement.toa_logpdf`), r = T_j - mu_i; and the delay's posterior mean given it was
     delayed. A Gamma(k, theta) delay d plus a Gaussian error: d | r has density
     proportional to d^(k-1) phi((d - m) / sigma) on d > 0, m = r - sigma^2 / theta; with
     u = m / sigma and G = phi(u) / Phi(u) (truncated-Gaussian moments),
@@ -38,10 +38,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import log_ndtr
 
-from .. import model as m
 from ..config import ModelConfig
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from ..engines import exact
+from ..model import measurement as m
 from .noise import direct_probability, fit_clutter_rate
 
 KM_PER_S = 1.48  # range per second of arrival time
@@ -65,7 +65,7 @@ def _delay_mean(resid_s: NDArray, sigma: float, tau: float, shape: int) -> NDArr
 @dataclass(frozen=True)
 class _Batch:
     """The windows with the same numbers of active beacons (s) and stored signals (K), one
-    row each: the E-step's association runs on them at once (`model.association_factors`
+    row each: the E-step's association runs on them at once (`model.measurement.association_factors`
     takes a batch of windows)."""
 
     mu_s: NDArray[np.float64]  # (n, s) predicted arrival times at the track
@@ -106,31 +106,14 @@ def fit_association(
         first = delayed = delay_sum = echoes = echo_chances = 0.0
         p_clutter = [np.zeros(0)]  # per batch, (n K,)
         for b in batches:
-            h = np.asarray(m.horizon_s(b.toa_s, info.max_signals, info.window_s))  # (n,)
-            f = m.association_factors(
-                b.mu_s, b.p_detect, b.toa_s, max_signals=info.max_signals, window_s=info.window_s, model=e_model
-            )
-            assoc = exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo)
-            p_echo = assoc.p_echo if assoc.p_echo is not None else np.zeros_like(assoc.p_match)
-            p_first = assoc.p_match - p_echo  # (n, s, K)
-            resid = b.toa_s[:, None, :] - b.mu_s[:, :, None]
-            p_delayed = 1.0 - direct_probability(resid, e_model)
-            first += p_first.sum()
-            delayed += float(np.sum(p_first * p_delayed))
-            delay = np.clip(
-                _delay_mean(resid, sigma_e, fitted.multipath_delay_s, fitted.multipath_delay_shape), 0.0, None
-            )
-            delay_sum += float(np.sum(p_first * p_delayed * delay))
-            echoes += p_echo.sum()
-            # An echo of beacon i at T_j is delayed from i's first arrival, taken at its
-            # expected time under the marginals; its delay informs tau as multipath's does.
-            heard = p_first.sum(axis=2)
-            first_toa = np.einsum("nsk,nk->ns", p_first, b.toa_s) / np.where(heard > 0, heard, 1.0)
-            echo_delay = np.clip(b.toa_s[:, None, :] - first_toa[:, :, None], 0.0, None)
-            delay_sum += float(np.sum(p_echo * echo_delay))
-            stored = m.delay_cdf(h[:, None] - b.toa_s, fitted)  # G(h - T_j)
-            echo_chances += float(np.sum(p_first * stored[:, None, :]))
-            p_clutter.append(assoc.p_clutter.ravel())
+            x = _expected(b, info, e_model, fitted, sigma_e)
+            first += x.first
+            delayed += x.delayed
+            delay_sum += x.multipath_delay
+            echoes += x.echoes
+            delay_sum += x.echo_delay
+            echo_chances += x.echo_chances
+            p_clutter.append(x.p_clutter)
         eps = float(np.clip(delayed / max(first, 1e-9), MIN_FRACTION, 0.5))
         tau = float(np.clip(delay_sum / max(delayed + echoes, 1e-9), 5.0, 200.0))
         echo = float(np.clip(echoes / max(echo_chances, 1e-9), MIN_FRACTION, 0.5))
@@ -146,3 +129,49 @@ def fit_association(
         "e_step_toa_sigma_s": round(sigma_e, 3),
     }
     return fitted, report
+
+
+@dataclass(frozen=True)
+class _Expectations:
+    """One batch's E-step sums under the association marginals: first arrivals, delayed
+    ones (multipath) and their summed delays, echoes and their delays from their beacon's
+    first arrival, the echoes' chances (first arrivals whose echo would be stored), and
+    each signal's clutter probability."""
+
+    first: float
+    delayed: float
+    multipath_delay: float
+    echoes: float
+    echo_delay: float
+    echo_chances: float
+    p_clutter: NDArray[np.float64]
+
+
+def _expected(b: _Batch, info: FloatInfo, e_model: ModelConfig, fitted: ModelConfig, sigma_e: float) -> _Expectations:
+    """The E-step on one batch: the exact association's marginals (first arrival, echo,
+    clutter) and P(delayed | residual) of each first arrival."""
+    h = np.asarray(m.horizon_s(b.toa_s, info.max_signals, info.window_s))  # (n,)
+    f = m.association_factors(
+        b.mu_s, b.p_detect, b.toa_s, max_signals=info.max_signals, window_s=info.window_s, model=e_model
+    )
+    assoc = exact.associate(f.log_match, f.log_unheard, log_echo=f.log_echo)
+    p_echo = assoc.p_echo if assoc.p_echo is not None else np.zeros_like(assoc.p_match)
+    p_first = assoc.p_match - p_echo  # (n, s, K)
+    resid = b.toa_s[:, None, :] - b.mu_s[:, :, None]
+    p_delayed = 1.0 - direct_probability(resid, e_model)
+    delay = np.clip(_delay_mean(resid, sigma_e, fitted.multipath_delay_s, fitted.multipath_delay_shape), 0.0, None)
+    # An echo of beacon i at T_j is delayed from i's first arrival, taken at its expected
+    # time under the marginals; its delay informs tau as multipath's does.
+    heard = p_first.sum(axis=2)
+    first_toa = np.einsum("nsk,nk->ns", p_first, b.toa_s) / np.where(heard > 0, heard, 1.0)
+    echo_delay = np.clip(b.toa_s[:, None, :] - first_toa[:, :, None], 0.0, None)
+    stored = m.delay_cdf(h[:, None] - b.toa_s, fitted)  # G(h - T_j)
+    return _Expectations(
+        first=p_first.sum(),
+        delayed=float(np.sum(p_first * p_delayed)),
+        multipath_delay=float(np.sum(p_first * p_delayed * delay)),
+        echoes=p_echo.sum(),
+        echo_delay=float(np.sum(p_echo * echo_delay)),
+        echo_chances=float(np.sum(p_first * stored[:, None, :])),
+        p_clutter=assoc.p_clutter.ravel(),
+    )

@@ -3,7 +3,7 @@
 For each window and each active beacon whose predicted arrival falls well inside what the
 window could store (before the horizon, by 3 sd), the beacon was heard or not (a signal
 of the window carries its label with probability >= 0.5). The model's detection
-probability p / (1 + exp((range - R) / w)) (`model.detection_prob`, w the configured
+probability p / (1 + exp((range - R) / w)) (`model.measurement.detection_prob`, w the configured
 fall-off width) is fitted per beacon by maximum likelihood of those Bernoulli outcomes,
 p within `P_BOUNDS` and R within `RANGE_BOUNDS_KM`. A beacon with too few opportunities
 keeps the configured values.
@@ -25,7 +25,7 @@ def heard_nowhere(p_detect: float) -> bool:
     """Whether a fitted peak probability is at its lower bound: the fit's way of saying the
     beacon is heard nowhere (no arrival, or only a few, carried its label), so that the
     tracker will call its arrivals clutter: right for a source out of range, wrong for one
-    whose few arrivals a pass called clutter (README, Robustness)."""
+    whose few arrivals a pass called clutter (docs/decisions.md)."""
     return p_detect <= P_BOUNDS[0]
 
 

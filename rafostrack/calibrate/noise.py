@@ -1,6 +1,6 @@
 """Arrival-time noise and clutter, estimated from a first pass.
 
-Multipath: maximum likelihood of the model's error density (`model.toa_logpdf`: a Gaussian
+Multipath: maximum likelihood of the model's error density (`model.measurement.toa_logpdf`: a Gaussian
 of sd sigma, mixed with an exponentially delayed copy for multipath, fraction eps, mean
 delay tau) over eps and tau, on the residuals of confidently labelled arrivals after the
 timing fit (`calibrate.kalman`, which gives sigma).
@@ -22,7 +22,7 @@ from scipy.special import expit, logit
 
 from ..config import ModelConfig
 from ..domain import ArrivalRecord, FloatInfo
-from ..model import horizon_s, toa_logpdf
+from ..model.measurement import horizon_s, toa_logpdf
 
 
 def fit_multipath(residual_s: NDArray, toa_sigma_s: float, model: ModelConfig) -> tuple[float, float]:

@@ -216,16 +216,7 @@ def read_bathymetry(
         west = 0.5 * (region.lon_min + region.lon_max) - 180.0
         lon_frame = west + np.mod(lon - west, 360.0)
         span = f"latitude {lat.min():g}..{lat.max():g}, longitude {lon.min():g}..{lon.max():g}"
-        for p_lat, p_lon, what in must_cover:
-            p = west + np.mod(p_lon - west, 360.0)
-            inside_lat = lat.min() - dlat / 2 <= p_lat <= lat.max() + dlat / 2
-            inside_lon = np.any(np.abs(lon_frame - p) <= dlon / 2 + 1e-9) or lon.max() - lon.min() >= 360 - 1.5 * dlon
-            if not (inside_lat and inside_lon):
-                raise _fail(
-                    path,
-                    f"the grid covers {span}, which does not contain the float's {what} ({p_lat:g}, {p_lon:g}); "
-                    "expected a grid covering the mission",
-                )
+        _check_cover(path, lat, lon, lon_frame, west, must_cover, span)
         rows = np.flatnonzero((lat >= region.lat_min - dlat) & (lat <= region.lat_max + dlat))
         cols = np.flatnonzero((lon_frame >= region.lon_min - dlon) & (lon_frame <= region.lon_max + dlon))
         if len(rows) < 2 or len(cols) < 2:
@@ -237,23 +228,7 @@ def read_bathymetry(
         keep = np.concatenate([[True], np.diff(lon_sorted) > 1e-9])  # 0 and 360 both present: one column
         lat_sorted = np.sort(lat[rows])
         var = ds[name].transpose(lat_dim, lon_dim)
-        pieces_per_read = max(1, _ROW_BLOCK_CELLS // (k_lat * len(cols))) * k_lat
-        means, spreads = [], []
-        row_order = rows if lat[1] > lat[0] else rows[::-1]  # rows south to north
-        for start in range(0, len(row_order) - k_lat + 1, pieces_per_read):
-            chunk_rows = np.sort(row_order[start : start + pieces_per_read])
-            if len(chunk_rows) < k_lat:
-                break
-            parts = [var.isel({lat_dim: slice(int(chunk_rows[0]), int(chunk_rows[-1]) + 1), lon_dim: s}).values
-                     for s in _runs(cols)]  # fmt: skip
-            raw = np.concatenate(parts, axis=1).astype(float)[:, order][:, keep]
-            if lat[1] < lat[0]:
-                raw = raw[::-1]
-            whole = (len(raw) // k_lat) * k_lat
-            mean, spread = _block_stats(raw[:whole], k_lat, k_lon)
-            means.append(mean)
-            spreads.append(spread)
-        values, spread = np.concatenate(means), np.concatenate(spreads)
+        values, spread = _block_average(var, lat, rows, cols, (order, keep), (k_lat, k_lon), (lat_dim, lon_dim))
         attrs_var = ds[name]
     finally:
         ds.close()
@@ -263,6 +238,62 @@ def read_bathymetry(
     read_sign = _decide_sign(path, name, values, lat_c, lon_c, sign, attrs_var, is_water)
     depth = -values if read_sign == "up" else values
     return Bathymetry(lat_c, lon_c, depth, spread, str(path), name, read_sign)
+
+
+def _check_cover(
+    path: Path,
+    lat: NDArray,
+    lon: NDArray,
+    lon_frame: NDArray,
+    west: float,
+    must_cover: tuple[tuple[float, float, str], ...],
+    span: str,
+) -> None:
+    """InputError unless every (lat, lon, what) of `must_cover` is within half a grid step
+    of the grid (longitudes compared in the frame starting at `west`)."""
+    dlat, dlon = abs(lat[1] - lat[0]), abs(lon[1] - lon[0])
+    for p_lat, p_lon, what in must_cover:
+        p = west + np.mod(p_lon - west, 360.0)
+        inside_lat = lat.min() - dlat / 2 <= p_lat <= lat.max() + dlat / 2
+        inside_lon = np.any(np.abs(lon_frame - p) <= dlon / 2 + 1e-9) or lon.max() - lon.min() >= 360 - 1.5 * dlon
+        if not (inside_lat and inside_lon):
+            raise _fail(
+                path,
+                f"the grid covers {span}, which does not contain the float's {what} ({p_lat:g}, {p_lon:g}); "
+                "expected a grid covering the mission",
+            )
+
+
+def _block_average(
+    var,
+    lat: NDArray,
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    columns: tuple[NDArray[np.intp], NDArray[np.bool_]],
+    cell: tuple[int, int],
+    dims: tuple[str, str],
+) -> tuple[NDArray, NDArray]:
+    """Mean and sd of the grid `var` (lat, lon) over cells of k_lat x k_lon points of its
+    `rows` x `cols`, rows south to north and the columns put in frame order and
+    deduplicated by `columns` = (order, keep); read a band of rows at a time."""
+    (order, keep), (k_lat, k_lon), (lat_dim, lon_dim) = columns, cell, dims
+    pieces_per_read = max(1, _ROW_BLOCK_CELLS // (k_lat * len(cols))) * k_lat
+    means, spreads = [], []
+    row_order = rows if lat[1] > lat[0] else rows[::-1]  # rows south to north
+    for start in range(0, len(row_order) - k_lat + 1, pieces_per_read):
+        chunk_rows = np.sort(row_order[start : start + pieces_per_read])
+        if len(chunk_rows) < k_lat:
+            break
+        parts = [var.isel({lat_dim: slice(int(chunk_rows[0]), int(chunk_rows[-1]) + 1), lon_dim: s}).values
+                 for s in _runs(cols)]  # fmt: skip
+        raw = np.concatenate(parts, axis=1).astype(float)[:, order][:, keep]
+        if lat[1] < lat[0]:
+            raw = raw[::-1]
+        whole = (len(raw) // k_lat) * k_lat
+        mean, spread = _block_stats(raw[:whole], k_lat, k_lon)
+        means.append(mean)
+        spreads.append(spread)
+    return np.concatenate(means), np.concatenate(spreads)
 
 
 def _decide_sign(path: Path, name: str, values, lat_c, lon_c, setting: str, var, is_water) -> str:

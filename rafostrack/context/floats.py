@@ -47,8 +47,8 @@ from scipy.special import ndtr
 from ..config import Config, ContextConfig
 from ..domain import BeaconTable, FloatInfo, Particles
 from ..errors import InputError
-from ..geodesy import wrap_lon
 from ..likelihoods.base import MoveFactor
+from ..model.geodesy import wrap_lon
 from .bathymetry import Bathymetry, Region, read_bathymetry
 from .bayesnet import DiscreteBayesNet, Node, binary_cpt
 from .grid import ContextGrid, ContextModel

@@ -7,7 +7,7 @@ this model does not capture); or `rw` (random walk): x_t = x_t-1 + N(0, process_
 Observations: position measurements z = x + N(0, sigma^2 I) from sensors, each seeing the
 target only within its range. The filter is sequential importance resampling with the
 bootstrap proposal: weights w_t = w_t-1 p(z_t | x_t) (the product over
-the measurements at step t), systematic resampling (`rafostrack.resampling`) when the
+the measurements at step t), systematic resampling (`rafostrack.filtering.resampling`) when the
 effective sample size falls below `ess_fraction` N. Context (`rafostrack.context.rules`):
     none:   no CF;
     naive:  w_t *= CF(x_t) at every step;
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ..resampling import ess, systematic
+from ..filtering.resampling import ess, systematic
 from .grid import ContextGrid
 from .rules import entry_log_factor, naive_log_factor, resample_by_cf
 

@@ -2,9 +2,9 @@
 
 A simulating engine (`base.SimulatingEngine`): it never evaluates the factors w_ij, u_i.
 For each particle X it simulates S windows from the model (`simulate_windows`: one window
-of `rafostrack.simulate`'s generative model, vectorised: each beacon detected with
+of `rafostrack.sim.simulate`'s generative model, vectorised: each beacon detected with
 probability Pd, arriving at mu + N(0, sigma^2) plus, with probability `multipath_fraction`,
-a multipath delay (`model.multipath_delays`), and with probability `echo_fraction` a second
+a multipath delay (`model.measurement.multipath_delays`), and with probability `echo_fraction` a second
 arrival (an echo) another such delay later, labelled with the same beacon;
 Poisson(`clutter_rate`) clutter uniform on [0, W];
 signals outside [0, W] lost; the float stores the earliest r), and compares each with the
@@ -20,7 +20,7 @@ distance between the sorted TOA vectors.
 The ABC likelihood is a Gaussian kernel of bandwidth eps (`tolerance_s`) on rho:
     log L(X) = log (1/S) sum_s exp(-rho_s / (2 eps^2)) - K log(sqrt(2 pi) eps).
 With c = infinity this is an unbiased estimate of the density of the stored TOAs convolved
-with N(0, eps^2 I), which tends to the exact p(T | X) of `rafostrack.model` as eps -> 0 and
+with N(0, eps^2 I), which tends to the exact p(T | X) of `rafostrack.model.measurement` as eps -> 0 and
 S -> infinity (tests/test_abc_engine.py). With finite c it is a pseudo-likelihood: observed
 clutter, which no simulation reproduces, costs the same g for every particle instead of
 zeroing every weight; it is no longer a density in T.
@@ -50,7 +50,7 @@ from numpy.typing import NDArray
 from scipy.special import logsumexp
 
 from ..config import Config, ModelConfig
-from ..model import multipath_delays
+from ..model.measurement import multipath_delays
 from .base import Association, WindowPrediction
 
 LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)

@@ -1,7 +1,7 @@
 """The association-engine interface and its registry.
 
 An engine computes, per particle, the window's association sum over partial matchings M
-of beacons to signals (`rafostrack.model` gives the factors, log w of shape (P, s, K) and
+of beacons to signals (`rafostrack.model.measurement` gives the factors, log w of shape (P, s, K) and
 log u of shape (P, s)):
 
     Z = sum_M prod_{(i,j) in M} w_ij prod_{i unmatched} u_i,

@@ -7,7 +7,7 @@ and backward: B_i(m) = weight of all completions by beacons i+1..s when m is tak
     B_{i-1}(m) = u_i B_i(m) + sum_{j not in m} w_ij B_i(m + {j}),   B_s(m) = 1
 (unmatched signals are clutter, weight 1 after the model's normalisation). Then
     Z = sum_m F_s(m),  P(i <-> j) = sum_{m not containing j} F_{i-1}(m) w_ij B_i(m + {j}) / Z.
-Echo pairs (`model.echo_factors`): a beacon may also take two signals j < j' at once,
+Echo pairs (`model.measurement.echo_factors`): a beacon may also take two signals j < j' at once,
     F_i(m) += w_ij E_jj' F_{i-1}(m - {j, j'}),   B_{i-1}(m) += w_ij E_jj' B_i(m + {j, j'}),
 and such a pair counts towards both signals' marginals.
 Cost O(s r 2^r) per particle (O(s r^2 2^r) with echoes), in a compiled kernel, one particle
@@ -38,7 +38,7 @@ def associate(
 
     `log_echo` (K, K), or (P, K, K) for one window per particle (a batch of windows with
     the same numbers of beacons and signals): the echo pair terms log E_jj'
-    (`model.echo_factors`); a beacon may then take a pair j < j' with weight w_ij E_jj',
+    (`model.measurement.echo_factors`); a beacon may then take a pair j < j' with weight w_ij E_jj',
     and both signals are its own.
     `marginals=False` runs the forward pass only (a third of the cost) and returns NaN
     marginals.

@@ -91,5 +91,12 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
         [np.where(np.isfinite(cor[stored]), cor[stored], np.nan), np.full(int(empty.sum()), np.nan)]
     )
     return build_record(
-        path, info, times[rows], values, warnings, quality=quality, where=lambda i: f"measurement {records[rows[i]]}"
+        path,
+        info,
+        beacons,
+        times[rows],
+        values,
+        warnings,
+        quality=quality,
+        where=lambda i: f"measurement {records[rows[i]]}",
     )

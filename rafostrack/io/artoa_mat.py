@@ -140,4 +140,4 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
     labels = np.array([names[int(s) - 1] if np.isfinite(s) and s > 0 else None for s in sel], dtype=object)
     ns = np.round((day * 86400.0) * 1e3).astype(np.int64) * np.timedelta64(1, "ms")
     times = (RAFOS_DAY_EPOCH + ns).astype("datetime64[ns]")
-    return build_record(path, info, times, toa, warnings, labels=labels, where=lambda i: f"TOA entry {i + 1}")
+    return build_record(path, info, beacons, times, toa, warnings, labels=labels, where=lambda i: f"TOA entry {i + 1}")

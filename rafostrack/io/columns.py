@@ -1,7 +1,7 @@
 """What every output column means: units, a description and, where CF has one, a standard name.
 
 One table for every writer: Parquet field metadata (`units`, `long_name`), NetCDF variable
-attributes, and README's "Output columns" (a test checks that README documents every
+attributes, and the user guide's "Output columns" (docs/user-guide.md; a test checks that it documents every
 column here with its units).
 """
 

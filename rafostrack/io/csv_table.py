@@ -14,6 +14,7 @@ import codecs
 import csv
 import warnings as pywarnings
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 import pandas as pd
@@ -137,6 +138,16 @@ def read_csv_table(path: Path, required: tuple[str, ...], optional: tuple[str, .
     the missing trailing fields are empty; more fields is an error.
     """
     path = Path(path)
+    quoted, header, header_lines = _checked_header(path, required, optional)
+    frame = _parse_rows(path, header, header_lines)
+    frame = _checked_rows(path, frame, header, quoted)
+    frame.attrs["first_data_line"] = header_lines + 1
+    return frame
+
+
+def _checked_header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) -> tuple[bool, list[str], int]:
+    """The file is a readable UTF-8 file with a valid header: whether it has quotes, the
+    header's columns and how many lines the header takes."""
     expected = f"expected a CSV file with columns {', '.join(required)}"
     if not path.exists():
         raise InputError(f"{path}: file not found ({expected})")
@@ -148,6 +159,12 @@ def read_csv_table(path: Path, required: tuple[str, ...], optional: tuple[str, .
     except OSError as exc:
         raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
     _check_header(path, header, header_lines, required, optional)
+    return quoted, header, header_lines
+
+
+def _parse_rows(path: Path, header: list[str], header_lines: int) -> pd.DataFrame:
+    """The rows after the header as text, the header's columns and `_EXTRA` (fields beyond
+    the header's), indexed by line; a parse failure or a row too long is an InputError."""
     try:
         with pywarnings.catch_warnings(record=True) as caught:
             # pandas only warns (and drops the extra fields) when a row has more fields than
@@ -174,14 +191,7 @@ def read_csv_table(path: Path, required: tuple[str, ...], optional: tuple[str, .
     except pd.errors.EmptyDataError:
         frame = None
     except pd.errors.ParserError as exc:
-        text = str(exc).strip()
-        if "Expected" in text and "fields" in text:
-            _raise_long_row(path, header, header_lines)
-            raise InputError(f"{path}: a row has more fields than the header; expected {len(header)}") from None
-        reason = text.splitlines()[0] if text else type(exc).__name__
-        if "EOF inside string" in reason:
-            reason = 'a quote (") is never closed'
-        raise InputError(f"{path}: cannot parse as CSV: {reason}") from None
+        _raise_parser_error(path, header, header_lines, exc)
     except (ValueError, UnicodeError, OSError, OverflowError) as exc:
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"{path}: cannot parse as CSV: {reason}") from None
@@ -190,6 +200,25 @@ def read_csv_table(path: Path, required: tuple[str, ...], optional: tuple[str, .
     if frame is None:
         frame = pd.DataFrame({c: pd.Series([], dtype=str) for c in [*header, _EXTRA]})
     frame.index = pd.RangeIndex(header_lines + 1, header_lines + 1 + len(frame))
+    return frame
+
+
+def _raise_parser_error(path: Path, header: list[str], header_lines: int, exc: pd.errors.ParserError) -> NoReturn:
+    """The InputError for pandas' parser error: a row too long (found by `_raise_long_row`),
+    an unclosed quote, or pandas' own first line of explanation."""
+    text = str(exc).strip()
+    if "Expected" in text and "fields" in text:
+        _raise_long_row(path, header, header_lines)
+        raise InputError(f"{path}: a row has more fields than the header; expected {len(header)}") from None
+    reason = text.splitlines()[0] if text else type(exc).__name__
+    if "EOF inside string" in reason:
+        reason = 'a quote (") is never closed'
+    raise InputError(f"{path}: cannot parse as CSV: {reason}") from None
+
+
+def _checked_rows(path: Path, frame: pd.DataFrame, header: list[str], quoted: bool) -> pd.DataFrame:
+    """The rows stripped, without `_EXTRA` and blank rows; InputError for a line break in a
+    (quoted) field or a non-empty field beyond the header's."""
     broken = np.zeros(len(frame), dtype=bool)
     for col in frame.columns if quoted else ():
         broken |= (
@@ -212,7 +241,6 @@ def read_csv_table(path: Path, required: tuple[str, ...], optional: tuple[str, .
         blank &= (frame[col] == "").to_numpy()
     if blank.any():
         frame = frame[~blank]
-    frame.attrs["first_data_line"] = header_lines + 1
     return frame
 
 

@@ -27,7 +27,7 @@ import pandas as pd
 
 from ..domain import FloatInfo
 from ..errors import InputError, nearest
-from ..geodesy import local_offsets_km
+from ..model.geodesy import local_offsets_km
 from .atomic import atomic_path, write_text_atomic
 from .columns import TRACK
 from .writers import write_parquet

@@ -1,9 +1,9 @@
 """`rafostrack legs FLOAT.csv`: a leg model fitted to a float's arrival times.
 
-1. The particle smoother (`method.track_record`) tracks the float as `rafostrack track`
+1. The particle smoother (`run.method.track_record`) tracks the float as `rafostrack track`
    does; the beacons, float and model its final pass used (after calibration: sound
    speed, per-beacon corrections, the float's clock residual, TOA noise, clutter, ...;
-   `TrackOutput.model_inputs`) give the windows' likelihood.
+   `TrackOutput.problem`) give the windows' likelihood.
 2. Each window's ranked-signal log-likelihood (association summed out by the configured
    engine, exact by default) is tabulated on a grid about the smoother's position
    (`evidence`), in a plane about the mission's centre (`plane`); the launch fix and the
@@ -33,9 +33,9 @@ from ..config import Config
 from ..domain import Window, elapsed_days
 from ..errors import InputError
 from ..likelihoods import arrivals_from_config
-from ..method import track_record
-from ..pipeline import LoadedFloat, TrackInputs, load_float
-from ..tracker import TrackOutput
+from ..run.method import track_record
+from ..run.one_float import LoadedFloat, TrackInputs, load_float
+from ..run.one_pass import TrackOutput
 from .evidence import FloatEvidence, build_grids, float_evidence
 from .model import LegPrior, Legs, log_prior
 from .plane import Plane
@@ -102,9 +102,9 @@ def fit_legs(
     output: TrackOutput,
     rng: np.random.Generator,
 ) -> LegFit:
-    """Steps 2-3 of the module docstring, from the smoother's `output` (its `model_inputs`,
-    else the loaded inputs, give the windows' likelihood)."""
-    config, info, record = loaded.config, loaded.info, loaded.record
+    """Steps 2-3 of the module docstring, from the smoother's `output` (the problem its final
+    pass tracked, else the loaded one, gives the windows' likelihood)."""
+    config, info, record = loaded.problem.config, loaded.problem.info, loaded.record
     if not record.windows:
         raise InputError(f"{record.path}: no listening windows to fit legs to")
     prior = leg_prior(config)
@@ -115,8 +115,9 @@ def fit_legs(
     times = np.array([w.time for w in record.windows], dtype="datetime64[ns]")
     window_days = elapsed_days(times, epoch)
     centres = plane.to_plane(track["lat"].to_numpy(), track["lon"].to_numpy())
-    beacons, model_info, cfg = output.model_inputs or (loaded.beacons, info, config)
-    likelihood = arrivals_from_config(beacons, model_info, cfg)
+    tracked = output.problem or loaded.problem
+    cfg = tracked.config
+    likelihood = arrivals_from_config(tracked.beacons, tracked.info, cfg)
     grids = build_grids(likelihood, list(record.windows), centres, plane, config.legs.grid_spacing_km,
                         config.legs.grid_half_width_km)  # fmt: skip
     grids_s = time.perf_counter() - started
@@ -187,11 +188,12 @@ def legs_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True) -> Le
 
     started = time.perf_counter()
     loaded = load_float(inputs)
-    leg_prior(loaded.config)  # a bad [legs] prior fails before the smoother runs
-    output = track_record(loaded.beacons, loaded.info, loaded.config, loaded.record, explicit=loaded.explicit)
+    config, float_id = loaded.problem.config, loaded.problem.info.float_id
+    leg_prior(config)  # a bad [legs] prior fails before the smoother runs
+    output = track_record(loaded.problem, loaded.record)
     smoother_s = time.perf_counter() - started
-    fit = fit_legs(loaded, output, float_seed(loaded.config, loaded.info.float_id))
+    fit = fit_legs(loaded, output, float_seed(config, float_id))
     fit = dataclasses.replace(fit, timings={"smoother_s": smoother_s, **fit.timings})
-    out_dir = Path(out_root) / loaded.info.float_id
+    out_dir = Path(out_root) / float_id
     run = write_outputs(fit, loaded, inputs, out_dir, plots=plots, total_s=time.perf_counter() - started)
-    return LegsResult(loaded.info.float_id, out_dir, fit, run)
+    return LegsResult(float_id, out_dir, fit, run)

@@ -4,7 +4,7 @@
   intervals (the nearest change time in each posterior sample), the mean velocity over
   the leg's span in each sample as speed (km/day) and compass heading (degrees clockwise
   from north) with 95% intervals, east/north velocity, and the leg's end points.
-- legs_track.parquet: the usual track schema (`estimates.TRACK_COLUMNS`) at each window:
+- legs_track.parquet: the usual track schema (`summaries.estimates.TRACK_COLUMNS`) at each window:
   the float's posterior position (its leg's position plus its wiggle, given the window:
   mean and covariance ellipse), the chain's effective sample size of the leg position,
   plus the leg velocity there (posterior mean and sd, km/day).
@@ -21,9 +21,9 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from .. import __version__
-from ..estimates import TRACK_COLUMNS
 from ..io.writers import file_digest, write_json, write_parquet
-from ..pipeline import LoadedFloat, TrackInputs
+from ..run.one_float import LoadedFloat, TrackInputs
+from ..summaries.estimates import TRACK_COLUMNS
 from .evidence import grid_loglik, window_positions
 from .floats import LegFit
 from .summaries import leg_table, position_samples, sample_ess
@@ -144,11 +144,11 @@ def run_record(fit: LegFit, loaded: LoadedFloat, inputs: TrackInputs, total_s: f
         "rafostrack_version": __version__,
         "float_id": fit.float_id,
         "inputs": {name: {"path": str(p), "sha256": file_digest(p)} for name, p in files.items()},
-        "config": loaded.config.to_dict(),
+        "config": loaded.problem.config.to_dict(),
         "windows": len(fit.windows),
         "runtime_s": round(total_s, 3),
         "timings_s": {name: round(v, 3) for name, v in fit.timings.items()},
-        "iterations": loaded.config.legs.iterations,
+        "iterations": loaded.problem.config.legs.iterations,
         "kept_samples": len(fit.chain.samples),
         "acceptance": {m: round(a, 4) for m, a in fit.chain.acceptance.items()},
         "steps": {m: round(float(v), 4) for m, v in fit.chain.steps.items()},
@@ -175,7 +175,7 @@ def write_outputs(
     fit: LegFit, loaded: LoadedFloat, inputs: TrackInputs, out_dir: Path, *, plots: bool, total_s: float
 ) -> dict[str, Any]:
     """Write every output atomically; return the run record."""
-    meta = {"version": __version__, "estimate": "legs", "config": loaded.config.to_dict()}
+    meta = {"version": __version__, "estimate": "legs", "config": loaded.problem.config.to_dict()}
     write_parquet(legs_frame(fit), out_dir / "legs.parquet", meta)
     track = track_frame(fit)
     write_parquet(track, out_dir / "legs_track.parquet", meta)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..geodesy import radii_of_curvature_m, wrap_lon
+from ..model.geodesy import radii_of_curvature_m, wrap_lon
 
 
 @dataclass(frozen=True)

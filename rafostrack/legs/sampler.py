@@ -113,6 +113,31 @@ Proposal = tuple[Legs, float, str, float, float]
 Move = Callable[[Legs, np.random.Generator], Proposal | None]
 
 
+TermsAt = Callable[[NDArray, slice, int], NDArray]  # (positions, observation slice, level) -> log-lik terms
+
+
+@dataclass
+class _Record:
+    """What the chain keeps: K at every iteration, the thinned samples after burn-in with
+    their log pi_leg and level, and the best state visited."""
+
+    trace: NDArray[np.int64]
+    best: Legs
+    best_lp: float
+    kept: list[Legs] = field(default_factory=list)
+    kept_lp: list[float] = field(default_factory=list)
+    kept_level: list[int] = field(default_factory=list)
+
+    def note_best(self, state: _State) -> None:
+        if state.target("leg") > self.best_lp:
+            self.best, self.best_lp = state.legs, state.target("leg")
+
+    def keep(self, state: _State) -> None:
+        self.kept.append(state.legs)
+        self.kept_lp.append(state.target("leg"))
+        self.kept_level.append(state.level)
+
+
 def run_chain(
     likelihood: PointLikelihood,
     prior: LegPrior,
@@ -125,18 +150,9 @@ def run_chain(
     """Run the sampler from `start` (module docstring)."""
     started = time.perf_counter()
     times = likelihood.times
-    knot_moves = any(config.moves.get(m, 0) > 0 for m in ("knot", "shift", "jump"))
-    legs = repair_start(start, prior) if knot_moves else start  # leg coordinates have no 1/|d| pole
     n_levels = int(getattr(likelihood, "n_levels", 1))
-    level = int(getattr(likelihood, "start_level", 0))
-
-    def terms_at(xy: NDArray, index: slice, at: int) -> NDArray[np.float64]:
-        return likelihood.terms(xy, index, level=at) if n_levels > 1 else likelihood.terms(xy, index)  # type: ignore[call-arg]
-
-    terms = terms_at(positions(legs, times), slice(0, len(times)), level)
-    state = _State(legs, terms, float(terms.sum()), log_prior(legs, prior), log_jacobian(legs), level)
-    if not math.isfinite(state.logprior + state.loglik):
-        raise ValueError("the starting trajectory has zero posterior density")
+    terms_at = _terms_function(likelihood, n_levels)
+    state = _start_state(likelihood, prior, start, config, terms_at)
     steps = {
         "speed": math.sqrt(config.speed_step_var),
         "heading": math.sqrt(config.heading_step_var),
@@ -145,6 +161,73 @@ def run_chain(
         "start": config.start_step,
     }
     adaptive = {"knot", "shift", "start"} | ({"speed", "heading"} if config.adapt else set())
+    names, weights = _move_weights(config, free_start, n_levels)
+    tried = dict.fromkeys(names, 0)
+    accepted = dict.fromkeys(names, 0)
+    burn = int(config.burn_in_fraction * config.iterations)
+    thin = max(1, math.ceil((config.iterations - burn) / config.max_kept))
+    record = _Record(np.empty(config.iterations, dtype=np.int64), state.legs, state.target("leg"))
+    choices = rng.choice(len(names), size=config.iterations, p=weights)
+    for it in range(config.iterations):
+        name = names[choices[it]]
+        if name == "level":
+            state, ok = _level_move(state, n_levels, terms_at, times, rng)
+            step_key = "level"
+        else:
+            proposal, step_key = _propose(name, state.legs, rng, steps, config, prior, free_start)
+            ok = False
+            if proposal is not None:
+                state, ok = _metropolis_hastings(state, proposal, prior, times, terms_at, rng)
+                if ok:
+                    record.note_best(state)
+        tried[name] += 1
+        accepted[name] += ok
+        if it < burn and step_key in adaptive:
+            steps[step_key] *= math.exp((float(ok) - TARGET_ACCEPTANCE) / math.sqrt(1.0 + tried[name] / 10.0))
+        record.trace[it] = state.legs.n_legs
+        if it >= burn and (it - burn) % thin == 0:
+            record.keep(state)
+    return Chain(
+        samples=tuple(record.kept),
+        log_posterior=np.array(record.kept_lp),
+        n_legs_trace=record.trace,
+        levels=np.array(record.kept_level, dtype=np.int64),
+        best=record.best,
+        best_log_posterior=record.best_lp,
+        acceptance={m: accepted[m] / max(tried[m], 1) for m in names},
+        steps=steps,
+        seconds=time.perf_counter() - started,
+    )
+
+
+def _terms_function(likelihood: PointLikelihood, n_levels: int) -> TermsAt:
+    """The likelihood's terms at a level (the level ignored by a likelihood without levels)."""
+
+    def terms_at(xy: NDArray, index: slice, at: int) -> NDArray[np.float64]:
+        return likelihood.terms(xy, index, level=at) if n_levels > 1 else likelihood.terms(xy, index)  # type: ignore[call-arg]
+
+    return terms_at
+
+
+def _start_state(
+    likelihood: PointLikelihood, prior: LegPrior, start: Legs, config: SamplerConfig, terms_at: TermsAt
+) -> _State:
+    """The chain's first state: `start` (repaired for the knot moves: leg coordinates have
+    no 1/|d| pole) at the likelihood's starting level; ValueError if its density is zero."""
+    times = likelihood.times
+    knot_moves = any(config.moves.get(m, 0) > 0 for m in ("knot", "shift", "jump"))
+    legs = repair_start(start, prior) if knot_moves else start
+    level = int(getattr(likelihood, "start_level", 0))
+    terms = terms_at(positions(legs, times), slice(0, len(times)), level)
+    state = _State(legs, terms, float(terms.sum()), log_prior(legs, prior), log_jacobian(legs), level)
+    if not math.isfinite(state.logprior + state.loglik):
+        raise ValueError("the starting trajectory has zero posterior density")
+    return state
+
+
+def _move_weights(config: SamplerConfig, free_start: bool, n_levels: int) -> tuple[list[str], NDArray[np.float64]]:
+    """The moves in use (`start` only with a free start, `level` only with levels) and
+    their normalised weights."""
     names = [
         m
         for m, w in config.moves.items()
@@ -152,67 +235,36 @@ def run_chain(
     ]
     weights = np.array([config.moves[m] for m in names], dtype=float)
     weights /= weights.sum()
-    tried = dict.fromkeys(names, 0)
-    accepted = dict.fromkeys(names, 0)
-    burn = int(config.burn_in_fraction * config.iterations)
-    thin = max(1, math.ceil((config.iterations - burn) / config.max_kept))
-    kept: list[Legs] = []
-    kept_lp: list[float] = []
-    kept_level: list[int] = []
-    trace = np.empty(config.iterations, dtype=np.int64)
-    best, best_lp = state.legs, state.target("leg")
-    choices = rng.choice(len(names), size=config.iterations, p=weights)
-    for it in range(config.iterations):
-        name = names[choices[it]]
-        ok = False
-        if name == "level":
-            state, ok = _level_move(state, n_levels, terms_at, times, rng)
-            proposal, step_key = None, "level"
-        else:
-            proposal, step_key = _propose(name, state.legs, rng, steps, config, prior, free_start)
-        if proposal is not None:
-            new, log_q, coords, a, b = proposal
-            lp = log_prior(new, prior)
-            if lp > -math.inf:
-                lo, hi = np.searchsorted(times, a, "left"), np.searchsorted(times, b, "right")
-                new_terms = terms_at(positions(new, times[lo:hi]), slice(lo, hi), state.level)
-                loglik = state.loglik - float(state.terms[lo:hi].sum()) + float(new_terms.sum())
-                cand = _State(new, state.terms, loglik, lp, log_jacobian(new) if coords == "knot" else 0.0, state.level)
-                if coords == "knot":
-                    log_ratio = cand.target("knot") - state.target("knot") + log_q
-                else:
-                    log_ratio = cand.target("leg") - state.target("leg") + log_q
-                if math.isfinite(log_ratio) and math.log(rng.random()) < log_ratio:
-                    terms = state.terms.copy()
-                    terms[lo:hi] = new_terms
-                    state = _State(new, terms, float(terms.sum()), lp, log_jacobian(new), state.level)
-                    ok = True
-                    if state.target("leg") > best_lp:
-                        best, best_lp = state.legs, state.target("leg")
-        tried[name] += 1
-        accepted[name] += ok
-        if it < burn and step_key in adaptive:
-            steps[step_key] *= math.exp((float(ok) - TARGET_ACCEPTANCE) / math.sqrt(1.0 + tried[name] / 10.0))
-        trace[it] = state.legs.n_legs
-        if it >= burn and (it - burn) % thin == 0:
-            kept.append(state.legs)
-            kept_lp.append(state.target("leg"))
-            kept_level.append(state.level)
-    return Chain(
-        samples=tuple(kept),
-        log_posterior=np.array(kept_lp),
-        n_legs_trace=trace,
-        levels=np.array(kept_level, dtype=np.int64),
-        best=best,
-        best_log_posterior=best_lp,
-        acceptance={m: accepted[m] / max(tried[m], 1) for m in names},
-        steps=steps,
-        seconds=time.perf_counter() - started,
-    )
+    return names, weights
+
+
+def _metropolis_hastings(
+    state: _State, proposal: Proposal, prior: LegPrior, times: NDArray, terms_at: TermsAt, rng: np.random.Generator
+) -> tuple[_State, bool]:
+    """Accept `proposal` with probability min(1, pi(new) q(back) / pi(old) q(forward)), pi in
+    the proposal's coordinates; only the terms of observations in its interval are
+    recomputed. The new or unchanged state, and whether it was accepted."""
+    new, log_q, coords, a, b = proposal
+    lp = log_prior(new, prior)
+    if not lp > -math.inf:  # zero prior density (or NaN)
+        return state, False
+    lo, hi = np.searchsorted(times, a, "left"), np.searchsorted(times, b, "right")
+    new_terms = terms_at(positions(new, times[lo:hi]), slice(lo, hi), state.level)
+    loglik = state.loglik - float(state.terms[lo:hi].sum()) + float(new_terms.sum())
+    cand = _State(new, state.terms, loglik, lp, log_jacobian(new) if coords == "knot" else 0.0, state.level)
+    if coords == "knot":
+        log_ratio = cand.target("knot") - state.target("knot") + log_q
+    else:
+        log_ratio = cand.target("leg") - state.target("leg") + log_q
+    if not (math.isfinite(log_ratio) and math.log(rng.random()) < log_ratio):
+        return state, False
+    terms = state.terms.copy()
+    terms[lo:hi] = new_terms
+    return _State(new, terms, float(terms.sum()), lp, log_jacobian(new), state.level), True
 
 
 def _level_move(
-    state: _State, n_levels: int, terms_at: Callable[[NDArray, slice, int], NDArray], times: NDArray,
+    state: _State, n_levels: int, terms_at: TermsAt, times: NDArray,
     rng: np.random.Generator,
 ) -> tuple[_State, bool]:  # fmt: skip
     """Move the likelihood's level to a neighbour (uniform among the 1 or 2 there are);

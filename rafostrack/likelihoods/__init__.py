@@ -14,14 +14,6 @@ from .base import Evidence, Likelihood, MoveFactor, outlier_scale
 from .fixes import PositionFixLikelihood, fix_loglik
 
 
-def move_factors_from_config(config: Config, beacons: BeaconTable, info: FloatInfo) -> tuple[MoveFactor, ...]:
-    """The configured factors on particle moves: the context constraints of `[context]`
-    (land, the sea floor; `rafostrack.context.floats`), none when it asks for none."""
-    from ..context.floats import context_factors  # the context package builds on this one
-
-    return context_factors(config, beacons, info)
-
-
 def arrivals_from_config(beacons: BeaconTable, info: FloatInfo, config: Config) -> ArrivalLikelihood:
     """The configured arrival-time evidence model."""
     return ARRIVAL_LIKELIHOODS[config.filter.likelihood](beacons, info, config)
@@ -38,6 +30,5 @@ __all__ = [
     "RankedArrivals",
     "arrivals_from_config",
     "fix_loglik",
-    "move_factors_from_config",
     "outlier_scale",
 ]

@@ -11,7 +11,7 @@ Three evidence models, registered in `ARRIVAL_LIKELIHOODS` under the config's
   1 - Pd whatever its predicted arrival;
 - `labeled` (eq. 20): the arrival file's `beacon_id` column as known labels.
 
-The factors themselves (predicted arrivals, w_ij, u_i) are `rafostrack.model`'s.
+The factors themselves (predicted arrivals, w_ij, u_i) are `rafostrack.model.measurement`'s.
 """
 
 from __future__ import annotations
@@ -24,13 +24,13 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import model as m
 from ..config import Config, ModelConfig, QualityConfig
 from ..domain import BeaconTable, FloatInfo, Particles, Window
 from ..engines import Engine, SimulatingEngine, WindowPrediction, engine_from_config
 from ..errors import InputError
-from ..quality import quality_log_ratio
+from ..model import measurement as m
 from .base import Evidence, Likelihood, outlier_scale
+from .quality import quality_log_ratio
 
 # Particles carrying less than this fraction of the mass are left out when association
 # marginals are recomputed for a reweighted (smoothed) cloud.

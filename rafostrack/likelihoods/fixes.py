@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..domain import Particles, PositionFix
-from ..geodesy import local_offsets_km
+from ..model.geodesy import local_offsets_km
 from .base import Evidence, Likelihood, outlier_scale
 
 

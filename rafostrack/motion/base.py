@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from ..config import MotionConfig
 from ..domain import Particles
-from ..geodesy import displace, local_offsets_km
+from ..model.geodesy import displace, local_offsets_km
 
 # Positions are kept off the poles, where east/north displacements are undefined.
 _MAX_LAT = 89.999
@@ -142,7 +142,7 @@ class MotionModel(ABC):
         reversible under: flat in position, the stationary law of the velocity (if any),
         N(v; mean, sd^2 I). gamma(x) f(x' | x) = gamma(x') f_rev(x | x') with f_rev
         the `reversed` model's transition: the two-filter smoother's artificial prior
-        (`rafostrack.two_filter`)."""
+        (`rafostrack.smoothing.two_filter`)."""
         if not self.has_velocity:
             return np.zeros(len(particles))
         if particles.velocity_km_per_day is None:
@@ -192,7 +192,7 @@ class JumpMixture(MotionModel):
 
     The jump keeps the posterior from being certain of the impossible: when later arrival
     times fit nowhere near the drift model's prediction, particles re-seeded where they do
-    fit (`rafostrack.recovery`) have a prior density to be weighted by, and the smoother
+    fit (`rafostrack.filtering.recovery`) have a prior density to be weighted by, and the smoother
     can join a recovered track to what came before.
     """
 

@@ -11,7 +11,7 @@ from typing import Any
 
 from ..config import ModelConfig
 from ..domain import BeaconTable, FloatInfo
-from ..estimates import Estimate
+from ..summaries.estimates import Estimate
 from .arrivals import draw_arrivals, plot_arrivals
 from .base import beacon_colors, date_axis, figure, save_png
 from .track_map import Background, draw_track, plot_track

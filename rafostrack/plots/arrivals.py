@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from ..config import ModelConfig
 from ..domain import BeaconTable, FloatInfo
-from ..model import predicted_arrivals
+from ..model.measurement import predicted_arrivals
 from .base import (
     CLUTTER_COLOR,
     Color,

@@ -29,7 +29,7 @@ from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
 
 from ..domain import BeaconTable, FloatInfo
-from ..posterior import ELLIPSE_95_SCALE
+from ..summaries.posterior import ELLIPSE_95_SCALE
 from .base import (
     DPI,
     FIGSIZE,
@@ -275,6 +275,28 @@ def draw_track(
     lat, lon_raw = _column(track, "lat"), _column(track, "lon")
     ref_lon = _reference_lon(lon_raw, info.launch_lon)
     lon = _unwrap_lon(lon_raw, ref_lon)
+    frame = _map_frame(lat, lon, info, truth, ref_lon)
+    ax, frame_width_km = _map_axes(fig, frame, info, background)
+    handles: list[object] = []
+    if len(times):
+        handles = _draw_estimate(fig, ax, track, times, lat, lon, modes, ref_lon, frame_width_km)
+    else:
+        _note(ax, "no track estimate")
+    if truth is not None and len(truth):
+        tlon = _unwrap_lon(_column(truth, "lon"), ref_lon)
+        ax.plot(tlon, _column(truth, "lat"), "--", color="k", lw=1.2, zorder=4, label="truth")
+    _draw_beacons(ax, beacons, ref_lon, frame)
+    _draw_fixes(ax, info, ref_lon)
+    _draw_scale_bar(ax, frame)
+    _finish_map(fig, ax, frame, handles, map_title(info.float_id) + _span_text(times))
+    return fig
+
+
+def _map_frame(
+    lat: NDArray, lon: NDArray, info: FloatInfo, truth: pd.DataFrame | None, ref_lon: float
+) -> tuple[float, float, float, float]:
+    """The map's (lat0, lat1, lon0, lon1) about the track, the fixes and the truth
+    (longitudes unwrapped about `ref_lon`)."""
     pts_lat: list[NDArray] = [lat, np.array([info.launch_lat])]
     pts_lon: list[NDArray] = [lon, _unwrap_lon(np.array([info.launch_lon]), ref_lon)]
     if info.has_end_fix:
@@ -283,10 +305,16 @@ def draw_track(
     if truth is not None and len(truth):
         pts_lat.append(_column(truth, "lat"))
         pts_lon.append(_unwrap_lon(_column(truth, "lon"), ref_lon))
-    frame = frame_of(np.concatenate(pts_lat), np.concatenate(pts_lon))
+    return frame_of(np.concatenate(pts_lat), np.concatenate(pts_lon))
+
+
+def _map_axes(
+    fig: Figure, frame: tuple[float, float, float, float], info: FloatInfo, background: Background | None
+) -> tuple[Axes, float]:
+    """The map's axes over `frame` (aspect 1 / cos(mid latitude)) with the background drawn,
+    and the frame's width in km."""
     lat0, lat1, lon0, lon1 = frame
     coslat = max(np.cos(np.radians(0.5 * (lat0 + lat1))), 0.05)
-    frame_width_km = (lon1 - lon0) * KM_PER_DEG * coslat
     ax = fig.add_subplot()
     ax.set_xlim(lon0, lon1)
     ax.set_ylim(lat0, lat1)
@@ -296,31 +324,46 @@ def draw_track(
     background(ax, lat0, lat1, lon0, lon1)  # the one seam for map context (coastline, depth)
     ax.set_xlim(lon0, lon1)
     ax.set_ylim(lat0, lat1)
+    return ax, (lon1 - lon0) * KM_PER_DEG * coslat
+
+
+def _draw_estimate(
+    fig: Figure,
+    ax: Axes,
+    track: pd.DataFrame,
+    times: NDArray[np.datetime64],
+    lat: NDArray,
+    lon: NDArray,
+    modes: pd.DataFrame | None,
+    ref_lon: float,
+    frame_width_km: float,
+) -> list[object]:
+    """The estimated track coloured by time, its ellipses, second modes and time colour bar;
+    the legend handles it adds beyond the axes' own."""
     handles: list[object] = []
-    if len(times):
-        tnum = mdates.date2num(times)
-        norm = _time_norm(tnum)
-        cmap = matplotlib.colormaps[TIME_CMAP]
-        colors = cmap(norm(tnum))
-        ax.plot(lon, lat, "-", color="0.55", lw=0.8, zorder=2)
-        ax.scatter(lon, lat, c=colors, s=10, zorder=3, label="estimated track")
-        drawn = _draw_ellipses(ax, track, times, lat, lon, colors, frame_width_km)
-        if drawn is not None:
-            step, factor = drawn
-            size = "" if factor == 1 else f", drawn ×{factor} enlarged"
-            handles.append(Patch(**_ellipse_colors(cmap(0.5)), label=f"95% ellipse (every {step:g} d{size})"))
-        _draw_modes(ax, track, modes, ref_lon)
-        if float(norm.vmax or 0.0) - float(norm.vmin or 0.0) > 1.0:  # a colour scale means nothing for one window
-            cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
-            date_ticks(cbar.ax.yaxis, times.min(), times.max())
-    else:
-        _note(ax, "no track estimate")
-    if truth is not None and len(truth):
-        tlon = _unwrap_lon(_column(truth, "lon"), ref_lon)
-        ax.plot(tlon, _column(truth, "lat"), "--", color="k", lw=1.2, zorder=4, label="truth")
-    _draw_beacons(ax, beacons, ref_lon, frame)
-    _draw_fixes(ax, info, ref_lon)
-    _draw_scale_bar(ax, frame)
+    tnum = mdates.date2num(times)
+    norm = _time_norm(tnum)
+    cmap = matplotlib.colormaps[TIME_CMAP]
+    colors = cmap(norm(tnum))
+    ax.plot(lon, lat, "-", color="0.55", lw=0.8, zorder=2)
+    ax.scatter(lon, lat, c=colors, s=10, zorder=3, label="estimated track")
+    drawn = _draw_ellipses(ax, track, times, lat, lon, colors, frame_width_km)
+    if drawn is not None:
+        step, factor = drawn
+        size = "" if factor == 1 else f", drawn ×{factor} enlarged"
+        handles.append(Patch(**_ellipse_colors(cmap(0.5)), label=f"95% ellipse (every {step:g} d{size})"))
+    _draw_modes(ax, track, modes, ref_lon)
+    if float(norm.vmax or 0.0) - float(norm.vmin or 0.0) > 1.0:  # a colour scale means nothing for one window
+        cbar = fig.colorbar(ScalarMappable(norm, cmap), ax=ax, shrink=0.9, pad=0.01)
+        date_ticks(cbar.ax.yaxis, times.min(), times.max())
+    return handles
+
+
+def _finish_map(
+    fig: Figure, ax: Axes, frame: tuple[float, float, float, float], handles: list[object], title: str
+) -> None:
+    """Limits, degree labels, grid, the legend under the map and the title."""
+    lat0, lat1, lon0, lon1 = frame
     ax.set_xlim(lon0, lon1)
     ax.set_ylim(lat0, lat1)
     ax.xaxis.set_major_formatter(FuncFormatter(lon_text))
@@ -332,8 +375,7 @@ def draw_track(
     all_handles = legend_handles + handles
     fig.legend(handles=all_handles, loc="outside lower center", fontsize=8, frameon=False,
                ncols=min(len(all_handles), 4))  # fmt: skip
-    ax.set_title(map_title(info.float_id) + _span_text(times))
-    return fig
+    ax.set_title(title)
 
 
 def _span_text(times: NDArray[np.datetime64]) -> str:

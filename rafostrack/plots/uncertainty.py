@@ -12,7 +12,7 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
-from ..estimates import runs_of
+from ..summaries.estimates import runs_of
 from .base import _column, _float_id, _note, _times, date_axis, figure, float_name, save_png
 
 

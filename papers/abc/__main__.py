@@ -1,0 +1,6 @@
+"""`python -m papers.abc`: the ABC binary-sensor paper's figures and REPORT.md."""
+
+from ..runner import paper_main
+
+if __name__ == "__main__":
+    paper_main("abc")

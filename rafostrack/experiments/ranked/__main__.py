@@ -1,6 +1,0 @@
-"""`python -m rafostrack.experiments.ranked`: the ranked-signal paper's figures and REPORT.md."""
-
-from rafostrack.experiments.runner import paper_main
-
-if __name__ == "__main__":
-    paper_main("ranked")

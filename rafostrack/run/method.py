@@ -1,0 +1,151 @@
+"""The whole method for one float: a robust first pass, calibration, and passes with the calibrated model.
+
+    1. First pass: filter and smoother with robust settings: the TOA noise sd widened to
+       `[calibrate] first_pass_toa_sigma_s`, so that timing errors of a few seconds (a
+       sound speed off by 0.5%, a source clock off its catalogue) do not lose the float,
+       and the configured drift model (broad by default).
+    2. Calibration (`rafostrack.calibrate`) from its confident labels: a batch Kalman
+       smoother of the track with the timing parameters and the float clock in the state,
+       its hyperparameters (drift, noise, clock wander) by maximum marginal likelihood.
+    3. Filter and smoother with the calibrated model; calibration again from that pass's
+       labels and track, `[calibrate] iterations` times in all (each pass's positions are
+       better than the last, and so is the next calibration; its hyperparameter search
+       starts where the last ended); the last pass is the result.
+       The position variance that the calibration leaves undetermined (`Calibration.
+       nuisance_cov_km2`) is added to the last pass's covariance.
+
+With `[calibrate] enabled = false`, one pass with the configured values. Values the user set
+explicitly (config files, flags: `Config.explicit`) are kept as set.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+
+from ..calibrate import Calibration, calibrate
+from ..config import Config, with_overrides
+from ..domain import ArrivalRecord
+from ..problem import FloatProblem
+from .one_pass import Tracker, TrackOutput
+
+# FFBSm quantile points per step in the passes that feed calibration. Their track and labels
+# are what calibration reads; on 512 points rather than the whole 1000-particle clouds their
+# backward pass costs a quarter, and the sample's first-pass track moves by 0.08 km RMSE
+# with the same labels (docs/decisions.md).
+CALIBRATION_COLUMNS = 512
+
+PassProgress = Callable[[int], Callable[[int, int], None] | None]  # pass number -> its progress callback
+
+
+def first_pass_config(config: Config) -> Config:
+    """The robust first pass: the TOA noise sd widened (unless the user set it,
+    `Config.explicit`), no calibration, `[calibrate] max_particles` (`calibration_pass`)."""
+    sigma = config.model.toa_sigma_s
+    if ("model", "toa_sigma_s") not in config.explicit:
+        sigma = max(sigma, config.calibrate.first_pass_toa_sigma_s)
+    return calibration_pass(with_overrides(config, model={"toa_sigma_s": sigma}))
+
+
+def calibration_pass(config: Config) -> Config:
+    """A pass that feeds calibration: at most `[calibrate] max_particles` particles, always
+    smoothed (its labels and track then use the whole record, whatever the output asks for,
+    so the result does not depend on it), by FFBSm alone (no backward filter: its track and
+    labels, not the reported posterior, are what it gives; on `CALIBRATION_COLUMNS` points,
+    `_feeding_calibration`)."""
+    particles = min(config.filter.particles, config.calibrate.max_particles)
+    return with_overrides(config, filter={"particles": particles}, smoother={"enabled": True, "two_filter": False})
+
+
+def track_record(
+    problem: FloatProblem,
+    record: ArrivalRecord,
+    *,
+    also_filtered: bool = False,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> TrackOutput:
+    """Track one float's record with the configured method (module docstring); the keys the
+    user set (`problem.config.explicit`) are not estimated. `progress(done, total, what)` is
+    told of each filter step of each pass. The output's `problem` is the one its final pass
+    tracked."""
+    config = problem.config
+    passes = 1 + config.calibrate.iterations if config.calibrate.enabled else 1
+    told = _pass_progress(progress, passes)
+    if config.calibrate.enabled:
+        out, final = _calibrated_method(problem, record, passes, told, also_filtered)
+    else:
+        out = Tracker.from_problem(problem).track(record, also_filtered=also_filtered, progress=told(1))
+        final = problem
+    return dataclasses.replace(out, problem=final)
+
+
+def _pass_progress(progress: Callable[[int, int, str], None] | None, passes: int) -> PassProgress:
+    """Pass number -> the progress callback of its filter steps ("pass 2 of 3")."""
+
+    def told(number: int) -> Callable[[int, int], None] | None:
+        if progress is None:
+            return None
+        return lambda done, total: progress(done, total, f"pass {number} of {passes}")
+
+    return told
+
+
+def _calibrated_method(
+    problem: FloatProblem, record: ArrivalRecord, passes: int, told: PassProgress, also_filtered: bool
+) -> tuple[TrackOutput, FloatProblem]:
+    """The whole method (module docstring): the calibrating passes, then the last pass with
+    the last calibration (or, with none, with the configured values); the output and the
+    problem the last pass tracked."""
+    calibration, spent = _calibrating_passes(problem, record, told)
+    if calibration is None:
+        note = f"{problem.info.float_id}: too few confident arrivals to calibrate; tracked with the configured values"
+        out = Tracker.from_problem(problem).track(record, also_filtered=also_filtered, progress=told(passes))
+        return dataclasses.replace(out, warnings=[*out.warnings, note]), problem
+    final = calibration.calibrated(problem)
+    out = Tracker.from_problem(final).track(
+        record, also_filtered=also_filtered, extra_cov=calibration.nuisance_cov_at, progress=told(passes)
+    )
+    report = {**calibration.report, "passes": passes}
+    out = dataclasses.replace(
+        out,
+        calibration=report,
+        filter_s=spent["filter_s"] + out.filter_s,
+        smoother_s=spent["smoother_s"] + out.smoother_s,
+        calibrate_s=spent["calibrate_s"],
+    )
+    return out, final
+
+
+def _calibrating_passes(
+    problem: FloatProblem, record: ArrivalRecord, told: PassProgress
+) -> tuple[Calibration | None, dict[str, float]]:
+    """Steps 1-2 and the passes between calibrations: the robust first pass, then
+    `[calibrate] iterations` calibrations, each but the last followed by a pass with it; the
+    last calibration (None: too few confident arrivals in the first pass) and the seconds
+    spent filtering, smoothing and calibrating."""
+    config = problem.config
+    robust = problem.with_config(first_pass_config(config))
+    out = _feeding_calibration(Tracker.from_problem(robust)).track(record, progress=told(1))
+    spent = {"filter_s": out.filter_s, "smoother_s": out.smoother_s, "calibrate_s": 0.0}
+    calibration: Calibration | None = None
+    for iteration in range(config.calibrate.iterations):
+        started = time.perf_counter()
+        start = calibration.hyper if calibration is not None else None
+        fitted = calibrate(out.estimate, record, problem, start=start)
+        spent["calibrate_s"] += time.perf_counter() - started
+        if fitted is None:
+            break
+        calibration = fitted
+        if iteration < config.calibrate.iterations - 1:
+            calibrated = calibration.calibrated(problem.with_config(calibration_pass(config)))
+            tracker = _feeding_calibration(Tracker.from_problem(calibrated))
+            out = tracker.track(record, extra_cov=calibration.nuisance_cov_at, progress=told(iteration + 2))
+            spent["filter_s"] += out.filter_s
+            spent["smoother_s"] += out.smoother_s
+    return calibration, spent
+
+
+def _feeding_calibration(tracker: Tracker) -> Tracker:
+    """`tracker` (of a `calibration_pass` config) with FFBSm on `CALIBRATION_COLUMNS` points."""
+    return dataclasses.replace(tracker, ffbsm_columns=CALIBRATION_COLUMNS)

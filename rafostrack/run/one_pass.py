@@ -1,0 +1,340 @@
+"""The method assembled from its components: filter, smooth (unless disabled), summarise.
+
+`Tracker.from_problem` picks each component from its registry (motion model, arrival
+likelihood and its engine, resampling scheme) for one float's problem; `Tracker.track`
+runs the float's record in memory, with no file I/O. `run.method.track_record` runs its passes
+and `one_float` reads inputs and writes outputs around them; tests, benchmarks and papers
+call it directly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from ..config import AmbiguityConfig, Config
+from ..context.floats import context_factors
+from ..domain import ArrivalRecord, FloatInfo, Particles, PositionFix
+from ..filtering.filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
+from ..filtering.guided import Guide
+from ..filtering.recovery import RecoverySettings
+from ..filtering.resampling import RESAMPLERS
+from ..likelihoods import (
+    ArrivalLikelihood,
+    MoveFactor,
+    PositionFixLikelihood,
+    arrivals_from_config,
+)
+from ..motion import JumpMixture, MotionModel, motion_from_config
+from ..problem import FloatProblem
+from ..smoothing.ffbsm import MAX_COLUMNS, Smoothed, column_points, smooth
+from ..smoothing.two_filter import JOIN_COLUMNS, forward_view, two_filter_smooth
+from ..summaries.estimates import Estimate, EstimateBuilder, Regions, build_estimate
+
+
+@dataclass(frozen=True)
+class TrackOutput:
+    estimate: Estimate  # smoothed when the smoother is enabled, else filtered
+    filtered: Estimate | None  # the filtered estimate, when asked for (or when it is the estimate)
+    n_resamples: int
+    warnings: list[str]  # recoverable problems met while filtering
+    filter_s: float
+    smoother_s: float
+    calibration: dict[str, Any] | None = None  # what the first pass estimated (`rafostrack.calibrate`)
+    calibrate_s: float = 0.0  # the first pass and the estimation
+    filter_ess: tuple[float, ...] = ()  # the filter's effective sample size at each window
+    n_checks: int = 0  # windows the recovery monitor searched
+    n_reseeds: int = 0  # windows where it re-seeded part of the cloud
+    # The problem the final pass tracked (after calibration: corrected timing, clock
+    # residual, fitted model), for whoever reuses its model (e.g. `rafostrack.legs`); set by
+    # `run.method.track_record`.
+    problem: FloatProblem | None = None
+    smoother: str = "none"  # which smoother made the estimate: "ffbsm", "two_filter" or "none"
+
+    @property
+    def track(self) -> pd.DataFrame:
+        return self.estimate.track
+
+    @property
+    def labels(self) -> pd.DataFrame:
+        return self.estimate.labels
+
+
+def _motion(config: Config) -> MotionModel:
+    """The configured drift model, made robust by a jump component when recovery is on."""
+    base = motion_from_config(config.motion)
+    rec = config.recovery
+    if not rec.enabled or rec.jump_rate_per_day == 0:
+        return base
+    return JumpMixture(base, rec.jump_rate_per_day, rec.jump_sd_km)
+
+
+def _recovery(config: Config) -> RecoverySettings | None:
+    rec = config.recovery
+    if not rec.enabled:
+        return None
+    return RecoverySettings(
+        search_radius_km=rec.search_radius_km, fraction=rec.reseed_fraction, check_every=rec.check_every
+    )
+
+
+@dataclass(frozen=True)
+class Tracker:
+    """One float's tracker: its components and the few settings that join them."""
+
+    info: FloatInfo
+    beacon_ids: np.ndarray
+    motion: MotionModel
+    arrivals: ArrivalLikelihood
+    settings: FilterSettings
+    launch_sd_km: float
+    end_fix: PositionFix | None
+    smooth: bool
+    ambiguity: AmbiguityConfig
+    seed: int
+    recovery: RecoverySettings | None = None
+    factors: tuple[MoveFactor, ...] = ()
+    guide: Guide | None = None  # part of each window's cloud drawn guided by it (`rafostrack.filtering.guided`)
+    two_filter: bool = False  # smooth by joining a backward filter (`rafostrack.smoothing.two_filter`)
+    ffbsm_columns: int = MAX_COLUMNS  # FFBSm: quantile points of each step's cloud (`ffbsm.smooth`)
+
+    @classmethod
+    def from_problem(cls, problem: FloatProblem) -> Tracker:
+        """The configured tracker of one float's problem."""
+        beacons, info, config = problem.beacons, problem.info, problem.config
+        use_end = config.fixes.use_end_fix and info.has_end_fix
+        return cls(
+            info=info,
+            beacon_ids=beacons.beacon_id,
+            motion=_motion(config),
+            arrivals=arrivals_from_config(beacons, info, config),
+            settings=FilterSettings(
+                config.filter.particles,
+                config.filter.resample_ess_fraction,
+                RESAMPLERS[config.filter.resampling],
+                config.filter.mode_link_km,
+                config.filter.max_modes,
+                config.filter.min_mode_mass,
+            ),
+            launch_sd_km=config.fixes.launch_sd_km,
+            end_fix=PositionFix(info.end_time, info.end_lat, info.end_lon, config.fixes.end_sd_km) if use_end else None,
+            smooth=config.smoother.enabled,
+            two_filter=config.smoother.two_filter,
+            ambiguity=config.ambiguity,
+            seed=config.filter.seed,
+            recovery=_recovery(config),
+            factors=context_factors(config, beacons, info),
+            guide=Guide(config.filter.guided_fraction) if config.filter.guided_fraction > 0 else None,
+        )
+
+    def _regions(self) -> Regions | None:
+        """Region labels from the first factor that parts the sea (context), if any."""
+        if not self.factors:
+            return None
+
+        def regions(particles: Particles) -> NDArray[np.int64] | None:
+            for factor in self.factors:
+                labels = factor.regions(particles)
+                if labels is not None:
+                    return labels
+            return None
+
+        return regions
+
+    def run_filter(
+        self,
+        record: ArrivalRecord,
+        *,
+        label_probs: bool = True,
+        keep: bool = True,
+        on_step: Callable[[Step], None] | None = None,
+        backward: bool = False,
+    ) -> FilterResult:
+        """The forward filter over the record (and the end fix), with the float's own
+        generator; see `ParticleFilter.run` for `keep` and `on_step`. `backward`: the filter
+        from the end fix back to the first window, with the drift reversed (its own
+        generator; `rafostrack.smoothing.two_filter`)."""
+        info = self.info
+        motion, stream = self.motion, info.float_id
+        start = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
+        events = observations(record.windows, self.end_fix)
+        if backward:
+            if self.end_fix is None:
+                raise ValueError(f"{info.float_id}: a backward filter starts from the end fix, and there is none")
+            motion, stream = self.motion.reversed(), f"{info.float_id} backward"
+            start, events = self.end_fix, list(reversed(record.windows))
+        fixes = PositionFixLikelihood(info.float_id)
+        pf = ParticleFilter(
+            motion,
+            self.arrivals,
+            fixes,
+            self.settings,
+            label_probs=label_probs,
+            recovery=self.recovery,
+            factors=self.factors,
+            guide=self.guide,
+        )
+        return pf.run(start, events, float_rng(self.seed, stream), keep=keep, on_step=on_step)
+
+    def _joins_two_filters(self, record: ArrivalRecord) -> bool:
+        """Whether the smoother joins a backward filter (`two_filter`): configured, an end fix
+        after every window, and no move factors (the backward filter would need them
+        reversed)."""
+        end = self.end_fix
+        return (
+            self.two_filter
+            and end is not None
+            and not self.factors
+            and all(w.time <= end.time for w in record.windows)
+            and len(record.windows) > 0
+        )
+
+    def _run_kept(
+        self,
+        record: ArrivalRecord,
+        columns: int,
+        *,
+        label_probs: bool = False,
+        on_step: Callable[[Step], None] | None = None,
+        backward: bool = False,
+    ) -> FilterResult:
+        """`run_filter`, keeping of each step what a smoother reads: its cloud on at most
+        `columns` quantile points of its weights (`ffbsm.column_points`, where the
+        smoothers would take them anyway), so that the history's memory does not grow with
+        the particle count. `on_step` sees each whole step."""
+        kept: list[Step] = []
+
+        def keep(step: Step) -> None:
+            if on_step is not None:
+                on_step(step)
+            kept.append(dataclasses.replace(step, cloud=column_points(step.cloud, columns)[0]))
+
+        run = self.run_filter(record, label_probs=label_probs, keep=False, on_step=keep, backward=backward)
+        return dataclasses.replace(run, steps=kept)
+
+    def _smooth(self, run: FilterResult, record: ArrivalRecord, two_filter: bool) -> tuple[list[Step], Smoothed]:
+        """The steps to summarise and their smoothed weights: FFBSm on the forward filter's
+        clouds, or, with `two_filter` (`_joins_two_filters`), both filters joined
+        (`rafostrack.smoothing.two_filter`)."""
+        if not two_filter:
+            return run.steps, smooth([s.cloud for s in run.steps], self.motion, max_columns=self.ffbsm_columns)
+        back = self._run_kept(record, JOIN_COLUMNS, backward=True)
+        windows, end = run.steps[:-1], run.steps[-1]
+        if run.prior is None or back.prior is None or any(s.window is None for s in windows) or end.window is not None:
+            raise ValueError(f"{self.info.float_id}: the forward filter's steps are not the windows and the end fix")
+        clouds, smoothed = two_filter_smooth(
+            [run.prior, *(s.cloud for s in windows)],
+            [s.loglik for s in windows],
+            forward_view([back.prior, *(s.cloud for s in back.steps)]),
+            [s.loglik for s in reversed(back.steps)],
+            self.motion,
+        )
+        steps = [dataclasses.replace(s, cloud=c) for s, c in zip(windows, clouds, strict=True)] + [end]
+        weights = [*smoothed.weights, end.cloud.weights]
+        return steps, Smoothed(weights, [*smoothed.kernel_cov_km2, np.zeros((2, 2))])
+
+    def track(
+        self,
+        record: ArrivalRecord,
+        *,
+        also_filtered: bool = False,
+        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None = None,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> TrackOutput:
+        """Filter the record, then smooth if configured, and summarise. `extra_cov(times)`
+        gives a (n, 2, 2) covariance (km^2) to add to each window's position covariance:
+        what the filter's model does not represent (`Calibration.nuisance_cov_at`).
+        `progress(done, total)` is told of each filter step.
+
+        Without smoothing, each step is summarised as the filter makes it and then dropped,
+        so memory does not grow with the record. Smoothing keeps every step's cloud on at
+        most `ffbsm_columns` quantile points of its weights (FFBSm), or each filter's
+        on `two_filter.JOIN_COLUMNS` (`_run_kept`): at most 80 KB per window with a
+        velocity, whatever the particle count."""
+        started = time.perf_counter()
+        filtered = EstimateBuilder(self.info.float_id, self.beacon_ids, self.ambiguity, "filtered", self._regions())
+        summarised = filtered if also_filtered or not self.smooth else None
+        on_step = self._on_step(record, summarised, extra_cov, progress)
+        if not self.smooth:
+            run = self.run_filter(record, keep=False, on_step=on_step)
+            estimate = filtered.result()
+            elapsed = time.perf_counter() - started
+            return TrackOutput(
+                estimate, estimate, run.n_resamples, run.warnings, elapsed, 0.0, **_counts(run, filtered)
+            )
+        two_filter = self._joins_two_filters(record)
+        run = self._run_kept(
+            record, JOIN_COLUMNS if two_filter else self.ffbsm_columns, label_probs=also_filtered, on_step=on_step
+        )
+        filter_s = time.perf_counter() - started
+        started = time.perf_counter()
+        estimate = self._smoothed_estimate(run, record, two_filter, extra_cov)
+        smoother_s = time.perf_counter() - started
+        return TrackOutput(
+            estimate,
+            filtered.result() if also_filtered else None,
+            run.n_resamples,
+            run.warnings,
+            filter_s,
+            smoother_s,
+            **_counts(run),
+            smoother="two_filter" if two_filter else "ffbsm",
+        )
+
+    def _on_step(
+        self,
+        record: ArrivalRecord,
+        filtered: EstimateBuilder | None,
+        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
+        progress: Callable[[int, int], None] | None,
+    ) -> Callable[[Step], None]:
+        """What the filter does with each step it makes: summarise it into `filtered` (when
+        given; with `extra_cov` at the step's time), then tell `progress`."""
+        total = len(record.windows) + (self.end_fix is not None)
+        done = iter(range(1, total + 1))
+
+        def on_step(step: Step) -> None:
+            if filtered is not None:
+                at = np.array([step.cloud.time], dtype="datetime64[ns]")
+                filtered.add(step, extra_cov_km2=None if extra_cov is None else extra_cov(at)[0])
+            if progress is not None:
+                progress(next(done), total)
+
+        return on_step
+
+    def _smoothed_estimate(
+        self,
+        run: FilterResult,
+        record: ArrivalRecord,
+        two_filter: bool,
+        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
+    ) -> Estimate:
+        """The smoothed estimate of a kept run (`_smooth`): each window's position covariance
+        with the smoother's kernel covariance and `extra_cov` added."""
+        steps, smoothed = self._smooth(run, record, two_filter)
+        times = np.array([s.cloud.time for s in steps], dtype="datetime64[ns]")
+        nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))
+        return build_estimate(
+            self.info.float_id,
+            steps,
+            self.beacon_ids,
+            self.ambiguity,
+            smoothed,
+            self.arrivals.label_probs,
+            extra_cov_km2=nuisance + np.array(smoothed.kernel_cov_km2).reshape(-1, 2, 2),
+            regions=self._regions(),
+        )
+
+
+def _counts(run: FilterResult, builder: EstimateBuilder | None = None) -> dict[str, Any]:
+    """What a filter run counted, for `TrackOutput` (ESS per window from the builder when the
+    run kept no steps)."""
+    ess = builder.window_ess if builder is not None else tuple(s.ess for s in run.steps if s.window is not None)
+    return {"filter_ess": tuple(ess), "n_checks": run.n_checks, "n_reseeds": run.n_reseeds}
