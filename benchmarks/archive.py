@@ -1,7 +1,7 @@
 """A DIMES-size archive through `rafostrack batch`: floats per minute and peak memory.
 
 Simulates the DIMES experiment as an archive: the 140 real launch/recovery pairs
-(`benchmarks/data/dimes_all_floats.csv`, from `../shared/data`) and the 12 real sound
+(`benchmarks/data/dimes_all_floats.csv`, from the public DIMES float table) and the 12 real sound
 sources, each float drifting from its launch to its recovery fix (integrated OU eddies
 around the mean velocity, `rafostrack.sim.simulate`), arrival times simulated along the drift
 with the default measurement model (clutter 1 per window, multipath, echoes). The mission

@@ -32,6 +32,22 @@ whole method, which the reported sd_km does not include).
 
 `--report FILE` also writes the tables, the targets and the label reliability into the
 `robustness` section of that Markdown file (`benchmarks/report.py`).
+
+Metadata faults: `--faults KIND[,KIND...]`, `--faults all` (every kind at once) or
+`--faults each` (one mission set per kind; kinds in `rafostrack.sim.faults.FAULT_KINDS`)
+simulates the missions with true clocks that drift (end offsets uniform in
+`CLOCK_END_OFFSET_S`) and a share of floats that never surfaced (`--never-surfaced`, default
+`NEVER_SURFACED_SHARE` here, 0 without --faults), tracks every float with the correct tables
+(the reference: the run above) and with the faulted ones, and prints per float the faulted
+run's RMSE, p95, coverage and confidently wrong windows beside the correct tables' (`ok_*`),
+the faults named in run.json's "metadata_checks" (a missing key names nothing) and the false
+alarms (contradicted values that were right; those of the correct tables' run too), then the
+targets, judged against the correct tables' run: p95 <= max(15 km, 1.2x), RMSE <= max(5 km,
+1.2x), coverage in [88%, 99%] wherever the correct tables' is, no more confidently wrong
+windows, every fault named, at most one false alarm per 100 floats. `--report` then writes
+the `robustness-faults` section.
+
+    python benchmarks/robustness.py --faults each [--floats 24] [--days 240] [--never-surfaced 0.1] ...
 """
 
 from __future__ import annotations
@@ -41,6 +57,7 @@ import dataclasses
 import json
 import tempfile
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -51,7 +68,7 @@ from report import markdown_table, write_section
 
 from rafostrack.batch.workers import single_threaded_math
 from rafostrack.config import with_overrides
-from rafostrack.domain import Particles
+from rafostrack.domain import FloatInfo, Particles
 from rafostrack.likelihoods import arrivals_from_config
 from rafostrack.model.geodesy import local_offsets_km
 from rafostrack.run.one_float import LoadedFloat, TrackInputs, load_float, track_float
@@ -62,7 +79,17 @@ from rafostrack.sim.evaluate import (
     label_scores,
     position_errors_km,
 )
-from rafostrack.sim.stress import DAY_NS, StressConfig, simulate_stress, write_stress_mission
+from rafostrack.sim.faults import FAULT_KINDS, check_kinds, false_alarms, read_faults, unnamed_faults
+from rafostrack.sim.stress import (
+    DAY_NS,
+    FAULT_STREAM,
+    StressConfig,
+    StressMission,
+    simulate_stress,
+    substream,
+    with_faults,
+    write_stress_mission,
+)
 from rafostrack.summaries.posterior import ELLIPSE_95_SCALE
 
 CLUTTER_RATES = (1.0, 2.0, 3.0)
@@ -70,36 +97,62 @@ GEOMETRIES = ("dimes", "weddell")
 TRUE_LABELS = {"filter": {"likelihood": "labeled"}}  # the reference filter's one difference
 CONFIDENT_PROB = 0.99  # a label given with at least this probability is a confident one
 COVERAGE_RANGE = (0.88, 0.99)  # the target for the 95% ellipses' coverage of the truth
+CLOCK_END_OFFSET_S = (-40.0, 40.0)  # --faults: the true float clocks' end offsets (DIMES: -66..+45 s)
+NEVER_SURFACED_SHARE = 0.1  # --faults: the share of floats that never surfaced, unless --never-surfaced
+FALSE_ALARMS_PER_FLOAT = 0.01  # --faults: at most one false alarm per 100 floats
 
 
-def make_missions(root: Path, n_floats: int, days: int, seed: int) -> list[Path]:
-    """n_floats floats, split over the geometries and clutter rates; their float files."""
+@dataclasses.dataclass(frozen=True)
+class Simulated:
+    """One mission of the benchmark: its directory name, the mission, its configuration and
+    the generator it was drawn from (whose seed the faults' generator derives from)."""
+
+    name: str
+    mission: StressMission
+    cfg: StressConfig
+    rng: np.random.Generator
+
+
+def simulate_missions(n_floats: int, days: int, seed: int, knobs: dict[str, Any] | None = None) -> list[Simulated]:
+    """n_floats floats, split over the geometries and clutter rates (stress `knobs` on top)."""
     groups = [(g, c) for g in GEOMETRIES for c in CLUTTER_RATES]
     per_group = [n_floats // len(groups) + (k < n_floats % len(groups)) for k in range(len(groups))]
-    files = []
+    missions = []
     for k, ((geometry, clutter), n) in enumerate(zip(groups, per_group, strict=True)):
         if n == 0:
             continue
-        cfg = StressConfig(days=days, clutter_rate=clutter)
-        mission = simulate_stress(
-            geometry, n, np.random.default_rng([seed, k]), cfg, prefix=f"{geometry[0]}{int(clutter)}f"
-        )
-        outdir = root / f"{geometry}_clutter{int(clutter)}"
-        write_stress_mission(mission, outdir)
-        files += [outdir / f"{f.info.float_id}.csv" for f in mission.floats]
+        cfg = StressConfig(days=days, clutter_rate=clutter, **(knobs or {}))
+        rng = np.random.default_rng([seed, k])
+        mission = simulate_stress(geometry, n, rng, cfg, prefix=f"{geometry[0]}{int(clutter)}f")
+        missions.append(Simulated(f"{geometry}_clutter{int(clutter)}", mission, cfg, rng))
+    return missions
+
+
+def write_missions(root: Path, missions: list[Simulated]) -> list[Path]:
+    """The missions' directories under `root`; their float files."""
+    files = []
+    for sim in missions:
+        write_stress_mission(sim.mission, root / sim.name)
+        files += [root / sim.name / f"{f.info.float_id}.csv" for f in sim.mission.floats]
     return files
+
+
+def make_missions(root: Path, n_floats: int, days: int, seed: int, knobs: dict[str, Any] | None = None) -> list[Path]:
+    """n_floats floats, split over the geometries and clutter rates; their float files."""
+    return write_missions(root, simulate_missions(n_floats, days, seed, knobs))
 
 
 def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFrame) -> float:
     """Labels right when each window is labelled at the TRUE position with the TRUE nuisances
-    (per-source sound speed, drift error and detection, the float clock's wander, TOA sd,
-    clutter rate, multipath split evenly between replaced and echoed arrivals): the ceiling a
-    labeller reaches when the track is known. It is not the Bayes rate exactly (the
-    simulator's delays are lognormal, its noise heavy-tailed, its detection fades in bad
-    propagation regimes; the model's are not), but clutter that lands within a few seconds of
-    a source's predicted arrival is as ambiguous here as for the tracker. The rest of the model
-    (e.g. the multipath delay law) is the run's configuration, `--config` layers included."""
-    b, info, per = loaded.problem.beacons, loaded.problem.info, events["beacons"]
+    (per-source sound speed, drift error and detection, the float clock's wander and, where
+    the mission records it, its true drift, TOA sd, clutter rate, multipath split evenly
+    between replaced and echoed arrivals): the ceiling a labeller reaches when the track is
+    known. It is not the Bayes rate exactly (the simulator's delays are lognormal, its noise
+    heavy-tailed, its detection fades in bad propagation regimes; the model's are not), but
+    clutter that lands within a few seconds of a source's predicted arrival is as ambiguous
+    here as for the tracker. The rest of the model (e.g. the multipath delay law) is the run's
+    configuration, `--config` layers included."""
+    b, info, per = loaded.problem.beacons, _true_linear_clock(loaded.problem.info, events, truth), events["beacons"]
     ids = list(b.beacon_id)
     beacons = dataclasses.replace(
         b,
@@ -137,6 +190,35 @@ def oracle_labels(loaded: LoadedFloat, events: dict[str, Any], truth: pd.DataFra
     return right / total if total else float("nan")
 
 
+def _true_linear_clock(info: FloatInfo, events: dict[str, Any], truth: pd.DataFrame) -> FloatInfo:
+    """`info` with the true clock's offsets from launch to the truth's last time, where the
+    mission records them (drifting clocks, floats that never surfaced); else `info`."""
+    if "true_clock_offset_s" not in events:
+        return info
+    start_s, end_s = events["true_clock_offset_s"]
+    end = truth["time"].iloc[-1].to_datetime64().astype("datetime64[ns]")
+    return dataclasses.replace(info, end_time=end, clock_offset_start_s=start_s, clock_offset_end_s=end_s)
+
+
+def read_truth(float_file: Path) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """A float's true track (naive UTC times) and its events (`truth/<float_id>.csv`, `.json`)."""
+    truth = pd.read_csv(float_file.parent / "truth" / f"{float_file.stem}.csv", parse_dates=["time"])
+    truth["time"] = truth["time"].dt.tz_localize(None)
+    return truth, json.loads((float_file.parent / "truth" / f"{float_file.stem}.json").read_text())
+
+
+def position_figures(track: pd.DataFrame, truth: pd.DataFrame) -> dict[str, float]:
+    """A track's RMSE, p95 and max error (km), 95%-ellipse coverage and confidently wrong windows."""
+    err = position_errors_km(track, truth)
+    return {
+        "rmse_km": float(np.sqrt(np.mean(err**2))),
+        "p95_km": float(np.percentile(err, 95)),
+        "max_km": float(err.max()),
+        "cover95": float(np.mean(inside_ellipse(track, truth, ELLIPSE_95_SCALE))),
+        "confident_wrong": int(confidently_wrong(err, track["sd_km"].to_numpy()).sum()),
+    }
+
+
 def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> tuple[dict[str, Any], pd.DataFrame]:
     """Track one float by default and with its true labels (with the filter seed, when
     given); score both against the truth. Returns the float's row and its labels' scores
@@ -147,11 +229,9 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> tuple[dict[s
         seeded = {"seed": seed}
         out_root = out_root / f"seed{seed}"
         out_root.mkdir(exist_ok=True)
-    truth = pd.read_csv(float_file.parent / "truth" / f"{float_file.stem}.csv", parse_dates=["time"])
-    truth["time"] = truth["time"].dt.tz_localize(None)
-    events = json.loads((float_file.parent / "truth" / f"{float_file.stem}.json").read_text())
+    truth, events = read_truth(float_file)
     started = time.perf_counter()
-    ours = track_float(
+    result = track_float(
         TrackInputs(float_file, config_files=config_files, overrides={"filter": seeded}),
         out_root / "default",
         plots=False,
@@ -161,35 +241,35 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> tuple[dict[s
     ref = track_float(
         TrackInputs(float_file, config_files=config_files, overrides=ref_overrides), out_root / "labelled", plots=False
     )
-    track = ours.output.track
+    track = result.output.track
     # the true labels, and the configuration the oracle starts from: the run's, so that a
     # model being tried (`--config`) is tried by the oracle too
     labelled = load_float(TrackInputs(float_file, config_files=config_files, overrides=TRUE_LABELS))
     ref_track = ref.output.track
     err = position_errors_km(track, truth)
-    ref_err = position_errors_km(ref_track, truth)
+    ours, theirs = position_figures(track, truth), position_figures(ref_track, truth)
     status = track["status"].value_counts().to_dict() if "status" in track else {}
-    labels = label_scores(ours.output.labels, labelled.record)
+    labels = label_scores(result.output.labels, labelled.record)
     confident = labels[labels["prob"] >= CONFIDENT_PROB]
     row = {
         "float": float_file.stem,
         "filter_seed": seed,
         "geometry": events["geometry"],
         "clutter": events["clutter_rate"],
-        "rmse_km": float(np.sqrt(np.mean(err**2))),
-        "p95_km": float(np.percentile(err, 95)),
-        "max_km": float(err.max()),
+        "rmse_km": ours["rmse_km"],
+        "p95_km": ours["p95_km"],
+        "max_km": ours["max_km"],
         "labels": float(labels["right"].mean()),
         "labels_oracle": oracle_labels(labelled, events, truth),
-        "cover95": float(np.mean(inside_ellipse(track, truth, ELLIPSE_95_SCALE))),
-        "ess_med": float(np.median(ours.output.filter_ess)),
-        "ref_rmse_km": float(np.sqrt(np.mean(ref_err**2))),
-        "ref_p95_km": float(np.percentile(ref_err, 95)),
-        "ref_cover95": float(np.mean(inside_ellipse(ref_track, truth, ELLIPSE_95_SCALE))),
+        "cover95": ours["cover95"],
+        "ess_med": float(np.median(result.output.filter_ess)),
+        "ref_rmse_km": theirs["rmse_km"],
+        "ref_p95_km": theirs["p95_km"],
+        "ref_cover95": theirs["cover95"],
         "seconds": seconds,
         "windows": len(track),
-        "confident_wrong": int(confidently_wrong(err, track["sd_km"].to_numpy()).sum()),
-        "ref_confident_wrong": int(confidently_wrong(ref_err, ref_track["sd_km"].to_numpy()).sum()),
+        "confident_wrong": ours["confident_wrong"],
+        "ref_confident_wrong": theirs["confident_wrong"],
         "wrong_p99": int((~confident["right"]).sum()),
         "expected_p99": float((1.0 - confident["prob"]).sum()),
         **{f"n_{k}": int(v) for k, v in status.items()},
@@ -258,7 +338,7 @@ def targets(table: pd.DataFrame) -> list[tuple[str, list[str], list[str] | None]
     ]
 
 
-def main() -> None:
+def _parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--floats", type=int, default=24)
     parser.add_argument("--days", type=int, default=240)
@@ -270,21 +350,60 @@ def main() -> None:
     parser.add_argument("--csv", type=Path, help="write the per-float table here")
     parser.add_argument("--filter-seeds", type=int, nargs="+", help="track every float with each [filter] seed")
     parser.add_argument("--report", type=Path, help="write the results into this Markdown file's robustness section")
+    parser.add_argument(
+        "--faults", help=f"metadata faults: KIND[,KIND...], all (together) or each (one at a time); {FAULT_KINDS}"
+    )
+    parser.add_argument(
+        "--never-surfaced",
+        type=float,
+        help=f"share of floats with no end fix and no end clock (default {NEVER_SURFACED_SHARE} with --faults, else 0)",
+    )
     args = parser.parse_args()
+    if args.faults and args.filter_seeds:
+        parser.error("--faults tracks with the configured [filter] seed; drop --filter-seeds")
+    try:
+        args.fault_sets = fault_sets(args.faults) if args.faults else []
+    except ValueError as error:
+        parser.error(str(error))
+    return args
+
+
+def _output_root(args: argparse.Namespace) -> Path:
     root = args.out or Path(tempfile.mkdtemp(prefix="rafostrack-robustness-"))
     root.mkdir(parents=True, exist_ok=True)
-    files = make_missions(root / "missions", args.floats, args.days, args.seed)
-    if args.only:
-        files = [f for f in files if f.stem in set(args.only)]
+    return root
+
+
+def run_tasks(fn: Callable[[Any], Any], tasks: list, workers: int) -> list:
+    """`fn` over `tasks`, in a pool of `workers` processes (single-threaded maths) when more than 1."""
+    if workers > 1:
+        with single_threaded_math(), ProcessPoolExecutor(workers) as pool:
+            return list(pool.map(fn, tasks))
+    return [fn(t) for t in tasks]
+
+
+def _only(files: list[Path], only: list[str] | None) -> list[Path]:
+    return [f for f in files if f.stem in set(only)] if only else files
+
+
+def main() -> None:
+    args = _parse_args()
+    if args.fault_sets:
+        run_faults(args)
+    else:
+        run_stress(args)
+
+
+def run_stress(args: argparse.Namespace) -> None:
+    """The stress benchmark: every float by default and with its true labels, per filter seed."""
+    root = _output_root(args)
+    knobs = {"never_surfaced_share": args.never_surfaced} if args.never_surfaced else None
+    files = _only(make_missions(root / "missions", args.floats, args.days, args.seed, knobs), args.only)
     seeds: list[int | None] = list(args.filter_seeds) if args.filter_seeds else [None]
     tasks = [(f, root / "out", tuple(args.config), seed) for seed in seeds for f in files]
     (root / "out").mkdir(exist_ok=True)
     started = time.perf_counter()
-    if args.workers > 1:
-        with single_threaded_math(), ProcessPoolExecutor(args.workers) as pool:
-            scored = list(pool.map(score, tasks))
-    else:
-        scored = [score(t) for t in tasks]
+    scored = run_tasks(score, tasks, args.workers)
     table = pd.DataFrame([row for row, _ in scored])
     labels = pd.concat([scores for _, scores in scored], ignore_index=True)
     counts = sorted(c for c in table.columns if c.startswith("n_"))
@@ -296,54 +415,11 @@ def main() -> None:
     failing_with: list[list[tuple[str, list[str], list[str] | None]]] = []
     sections: list[str] = []  # the report's text, one entry per seed and one for the seed spread
     for seed in seeds:
-        runs = _of_seed(table, seed)
-        notes: list[str] = []  # the lines printed under the table, for the report
-
-        def say(line: str, notes: list[str] = notes) -> None:
-            print(line)
-            notes.append(line)
-
-        if seed is not None:
-            print(f"\n[filter] seed = {seed}")
-        print(runs[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
-        failing_with.append(targets(runs))
-        for name, failing, reference in failing_with[-1]:
-            say(
-                f"{'PASS' if not failing else 'FAIL'}: {name}"
-                + (f" ({len(failing)}: {', '.join(failing)})" if failing else "")
-                + (f"; its reference fails it on {len(reference)}" if reference is not None else "")
-                + (f" ({', '.join(reference)})" if reference else "")
-            )
-        wrong = runs.loc[runs["confident_wrong"] > 0, ["float", "confident_wrong"]]
-        say(
-            f"confidently wrong windows (> 30 km off, sd_km under half the error): {wrong['confident_wrong'].sum()}"
-            f" of {runs['windows'].sum()}"
-            + (f" ({', '.join(f'{f} {n}' for f, n in wrong.itertuples(index=False))})" if len(wrong) else "")
-            + f"; the true-label filter's: {runs['ref_confident_wrong'].sum()}"
-        )
-        say(
-            f"labels given with p >= {CONFIDENT_PROB}: {runs['wrong_p99'].sum()} wrong, "
-            f"{runs['expected_p99'].sum():.1f} expected"
-        )
-        mine = _of_seed(labels, seed)
-        print("label reliability, all floats (a calibrated labeller: right = mean_prob in every bin):")
-        reliability = label_reliability(mine)
-        print(reliability.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
-        sections.append(_seed_report(seed, runs[cols], notes, reliability))
+        failing, section = _print_seed(seed, _of_seed(table, seed), cols, _of_seed(labels, seed))
+        failing_with.append(failing)
+        sections.append(section)
     if len(seeds) > 1:
-        print(f"\nfailing with every seed ({', '.join(map(str, seeds))}):")
-        for k, (name, _, _) in enumerate(failing_with[0]):
-            always = sorted(set.intersection(*(set(per_seed[k][1]) for per_seed in failing_with)))
-            print(f"  {name}: {len(always)}" + (f" ({', '.join(always)})" if always else ""))
-        spread = seed_spread(root / "out", [int(k) for k in args.filter_seeds], [f.stem for f in files])
-        ratio = spread["spread_km"] / spread["median_sd_km"]
-        print("\nseed spread (RMS distance of each seed's track from their mean, km) and the median sd_km:")
-        print(spread.T.to_string(float_format=lambda x: f"{x:.2f}"))
-        print(
-            f"median spread {spread['spread_km'].median():.2f} km, {ratio.median():.0%} of the median sd_km "
-            f"(largest: {ratio.idxmax()}, {ratio.max():.0%})"
-        )
-        sections.append(_spread_report(seeds, failing_with, spread))
+        sections.append(_print_spread(root / "out", seeds, failing_with, [f.stem for f in files]))
     print(f"\n{len(table)} runs in {time.perf_counter() - started:.0f} s ({args.workers} workers); outputs in {root}")
     if args.csv:
         table.to_csv(args.csv, index=False)
@@ -356,6 +432,245 @@ def main() -> None:
             f"{time.perf_counter() - started:.0f} s with {args.workers} workers."
         )
         write_section(args.report, "robustness", "\n\n".join([setup, *sections]))
+
+
+def _print_seed(
+    seed: int | None, runs: pd.DataFrame, cols: list[str], labels: pd.DataFrame
+) -> tuple[list[tuple[str, list[str], list[str] | None]], str]:
+    """Print one filter seed's table (`cols` of `runs`), targets, confident answers and label
+    reliability; the targets and the report's text."""
+    if seed is not None:
+        print(f"\n[filter] seed = {seed}")
+    print(runs[cols].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    failing = targets(runs)
+    notes = [
+        f"{'PASS' if not fails else 'FAIL'}: {name}"
+        + (f" ({len(fails)}: {', '.join(fails)})" if fails else "")
+        + (f"; its reference fails it on {len(reference)}" if reference is not None else "")
+        + (f" ({', '.join(reference)})" if reference else "")
+        for name, fails, reference in failing
+    ]
+    wrong = runs.loc[runs["confident_wrong"] > 0, ["float", "confident_wrong"]]
+    notes.append(
+        f"confidently wrong windows (> 30 km off, sd_km under half the error): {wrong['confident_wrong'].sum()}"
+        f" of {runs['windows'].sum()}"
+        + (f" ({', '.join(f'{f} {n}' for f, n in wrong.itertuples(index=False))})" if len(wrong) else "")
+        + f"; the true-label filter's: {runs['ref_confident_wrong'].sum()}"
+    )
+    notes.append(
+        f"labels given with p >= {CONFIDENT_PROB}: {runs['wrong_p99'].sum()} wrong, "
+        f"{runs['expected_p99'].sum():.1f} expected"
+    )
+    print("\n".join(notes))
+    print("label reliability, all floats (a calibrated labeller: right = mean_prob in every bin):")
+    reliability = label_reliability(labels)
+    print(reliability.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
+    return failing, _seed_report(seed, runs[cols], notes, reliability)
+
+
+def _print_spread(out_root: Path, seeds: list[int | None], failing_with: list, floats: list[str]) -> str:
+    """Print the floats failing with every seed and the seed spread; the report's text."""
+    print(f"\nfailing with every seed ({', '.join(map(str, seeds))}):")
+    for k, (name, _, _) in enumerate(failing_with[0]):
+        always = sorted(set.intersection(*(set(per_seed[k][1]) for per_seed in failing_with)))
+        print(f"  {name}: {len(always)}" + (f" ({', '.join(always)})" if always else ""))
+    spread = seed_spread(out_root, [int(k) for k in seeds if k is not None], floats)
+    ratio = spread["spread_km"] / spread["median_sd_km"]
+    print("\nseed spread (RMS distance of each seed's track from their mean, km) and the median sd_km:")
+    print(spread.T.to_string(float_format=lambda x: f"{x:.2f}"))
+    print(
+        f"median spread {spread['spread_km'].median():.2f} km, {ratio.median():.0%} of the median sd_km "
+        f"(largest: {ratio.idxmax()}, {ratio.max():.0%})"
+    )
+    return _spread_report(seeds, failing_with, spread)
+
+
+# --------------------------------------------------------------------------------------
+# Metadata faults (--faults)
+
+
+def fault_sets(text: str) -> list[tuple[str, tuple[str, ...]]]:
+    """The mission sets of `--faults`: (name, kinds) for `all`, `each` or `KIND[,KIND...]`."""
+    if text == "all":
+        return [("all", FAULT_KINDS)]
+    if text == "each":
+        return [(kind, (kind,)) for kind in FAULT_KINDS]
+    kinds = check_kinds(k.strip() for k in text.split(","))
+    return [("+".join(kinds), kinds)]
+
+
+def faulted(sim: Simulated, kinds: tuple[str, ...]) -> Simulated:
+    """`sim` with the faults `kinds` in its tables (the generator `simulate_stress` would use)."""
+    cfg = dataclasses.replace(sim.cfg, faults=kinds)
+    return dataclasses.replace(sim, mission=with_faults(sim.mission, cfg, substream(sim.rng, FAULT_STREAM)), cfg=cfg)
+
+
+def metadata_checks(run_json: Path) -> list[dict[str, Any]]:
+    """run.json's "metadata_checks" (none where the key is missing)."""
+    return list(json.loads(Path(run_json).read_text()).get("metadata_checks", []))
+
+
+def _alarm_text(checks: list[dict[str, Any]]) -> str:
+    return "; ".join(f"{Path(str(c['file'])).name} {c['id']} {c['field']}" for c in checks)
+
+
+def score_faulted(task: tuple[Path, Path, tuple[Path, ...]]) -> dict[str, Any]:
+    """Track one float of a faulted mission by default; its figures, the faults (its own and
+    the sources') its metadata checks name, and their false alarms."""
+    float_file, out_root, config_files = task
+    truth, events = read_truth(float_file)
+    inputs = TrackInputs(float_file, config_files=config_files, overrides={"filter": {}})
+    track = track_float(inputs, out_root, plots=False).output.track
+    mine = [f for f in read_faults(float_file.parent / "truth" / "faults.json") if f.file == "beacons.csv"
+            or f.id == float_file.stem]  # fmt: skip
+    checks = metadata_checks(out_root / float_file.stem / "run.json")
+    unnamed, alarms = unnamed_faults(mine, checks), false_alarms(mine, checks)
+    return {
+        "float": float_file.stem,
+        "geometry": events["geometry"],
+        "clutter": events["clutter_rate"],
+        "surfaced": bool(events.get("surfaced", True)),
+        **{k: v for k, v in position_figures(track, truth).items() if k != "max_km"},
+        "faults": len(mine),
+        "named": len(mine) - len(unnamed),
+        "false_alarms": len(alarms),
+        "unnamed_list": "; ".join(f"{f.kind} ({f.file} {f.id} {f.field})" for f in unnamed),
+        "false_alarm_list": _alarm_text(alarms),
+    }
+
+
+def reference_rows(rows: list[dict[str, Any]], out_root: Path) -> pd.DataFrame:
+    """The correct tables' runs (`score` rows) by float, with their false alarms (every
+    contradicted value: the tables were right)."""
+    table = pd.DataFrame(rows).set_index("float")
+    alarms = {name: false_alarms([], metadata_checks(out_root / "default" / name / "run.json")) for name in table.index}
+    table["false_alarms"] = [len(alarms[name]) for name in table.index]
+    table["false_alarm_list"] = [_alarm_text(alarms[name]) for name in table.index]
+    return table
+
+
+FAULT_TARGET_KEYS = ("p95", "rmse", "coverage", "confident_wrong", "unnamed", "false_alarm")  # fault_targets' order
+FAULT_COLUMNS = ["rmse_km", "p95_km", "cover95", "confident_wrong", "false_alarms"]
+
+
+def fault_table(reference: pd.DataFrame, rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """The faulted runs' rows beside the correct tables' figures (`ok_*`)."""
+    ok = reference[[*FAULT_COLUMNS, "false_alarm_list"]].add_prefix("ok_")
+    return pd.DataFrame(rows).join(ok, on="float")
+
+
+def fault_targets(table: pd.DataFrame) -> list[tuple[str, bool, list[str]]]:
+    """The metadata-fault targets against the correct tables' runs: (name, passed, floats failing)."""
+
+    def floats(where: pd.Series) -> list[str]:
+        return list(table.loc[where, "float"])
+
+    def inside(cover: pd.Series) -> pd.Series:
+        return (cover >= COVERAGE_RANGE[0]) & (cover <= COVERAGE_RANGE[1])
+
+    def worse(column: str, floor_km: float) -> pd.Series:
+        return table[column] > np.maximum(floor_km, 1.2 * table[f"ok_{column}"])
+
+    alarms = int(table["false_alarms"].sum() + table["ok_false_alarms"].sum())
+    checks = [
+        ("p95 <= max(15 km, 1.2x the correct tables')", floats(worse("p95_km", 15.0))),
+        ("RMSE <= max(5 km, 1.2x the correct tables')", floats(worse("rmse_km", 5.0))),
+        (f"95%-ellipse coverage in [{COVERAGE_RANGE[0]:.0%}, {COVERAGE_RANGE[1]:.0%}] wherever the correct tables' is",
+         floats(inside(table["ok_cover95"]) & ~inside(table["cover95"]))),
+        ("confidently wrong windows no more than the correct tables'",
+         floats(table["confident_wrong"] > table["ok_confident_wrong"])),
+        ("every injected fault named", floats(table["named"] < table["faults"])),
+    ]  # fmt: skip
+    result = [(name, not failing, failing) for name, failing in checks]
+    allowed = FALSE_ALARMS_PER_FLOAT * len(table)
+    any_alarm = floats((table["false_alarms"] > 0) | (table["ok_false_alarms"] > 0))
+    result.append((f"at most one false alarm per 100 floats ({alarms}, both runs)", alarms <= allowed, any_alarm))
+    return result
+
+
+def _fault_notes(table: pd.DataFrame, found: list[tuple[str, bool, list[str]]]) -> list[str]:
+    """The lines under a fault set's table: the targets, then per float the faults not named
+    and the false alarms."""
+    notes = [
+        f"{'PASS' if passed else 'FAIL'}: {name}" + (f" ({len(failing)}: {', '.join(failing)})" if failing else "")
+        for name, passed, failing in found
+    ]
+    for row in table.itertuples(index=False):
+        if row.unnamed_list:
+            notes.append(f"{row.float}: not named: {row.unnamed_list}")
+        if row.false_alarm_list:
+            notes.append(f"{row.float}: false alarms: {row.false_alarm_list}")
+        if row.ok_false_alarm_list:
+            notes.append(f"{row.float}: false alarms with the correct tables: {row.ok_false_alarm_list}")
+    return notes
+
+
+FAULT_TABLE = ["float", "geometry", "clutter", "surfaced", "ok_rmse_km", "rmse_km", "ok_p95_km", "p95_km", "ok_cover95",
+               "cover95", "ok_confident_wrong", "confident_wrong", "faults", "named", "false_alarms",
+               "ok_false_alarms"]  # fmt: skip
+
+
+def run_faults(args: argparse.Namespace) -> None:
+    """The fault benchmark: every float with the correct tables (`score`), then with each
+    fault set's tables (`score_faulted`); per set the table, the targets and the report."""
+    root, started = _output_root(args), time.perf_counter()
+    share = NEVER_SURFACED_SHARE if args.never_surfaced is None else args.never_surfaced
+    knobs = {"clock_end_offset_s": CLOCK_END_OFFSET_S, "never_surfaced_share": share}
+    missions = simulate_missions(args.floats, args.days, args.seed, knobs)
+    correct = _only(write_missions(root / "missions" / "correct", missions), args.only)
+    (root / "out" / "correct").mkdir(parents=True, exist_ok=True)
+    configs = tuple(args.config)
+    scored = run_tasks(score, [(f, root / "out" / "correct", configs, None) for f in correct], args.workers)
+    reference = reference_rows([row for row, _ in scored], root / "out" / "correct")
+    tables, sections = {}, []
+    for name, kinds in args.fault_sets:
+        files = _only(write_missions(root / "missions" / name, [faulted(sim, kinds) for sim in missions]), args.only)
+        (root / "out" / name).mkdir(parents=True, exist_ok=True)
+        rows = run_tasks(score_faulted, [(f, root / "out" / name, configs) for f in files], args.workers)
+        tables[name] = fault_table(reference, rows)
+        sections.append(_print_fault_set(name, tables[name]))
+    if len(tables) > 1:
+        sections.append(_print_fault_summary(tables))
+    runs = f"{len(correct)} floats with correct tables and in {len(tables)} fault set(s)"
+    print(f"\n{runs} in {time.perf_counter() - started:.0f} s ({args.workers} workers); outputs in {root}")
+    if args.csv:
+        pd.concat([t.assign(fault_set=name) for name, t in tables.items()]).to_csv(args.csv, index=False)
+    if args.report:
+        setup = (
+            f"{len(correct)} stress floats of {args.days} days (missions of seed {args.seed}; true clocks ending "
+            f"{CLOCK_END_OFFSET_S[0]:g}..{CLOCK_END_OFFSET_S[1]:g} s off, {share:.0%} of floats never surfaced), "
+            f"tracked with the default settings with correct tables (`ok_*`) and with faulted ones; {runs} in "
+            f"{time.perf_counter() - started:.0f} s with {args.workers} workers."
+        )
+        write_section(args.report, "robustness-faults", "\n\n".join([setup, *sections]))
+
+
+def _print_fault_set(name: str, table: pd.DataFrame) -> str:
+    """Print one fault set's table and targets; the report's text."""
+    notes = _fault_notes(table, fault_targets(table))
+    print(
+        f"\nfaults: {name} ({int(table['faults'].sum())} over the floats; a source's counts once per float hearing it)"
+    )
+    pd.set_option("display.width", 200)
+    print(table[FAULT_TABLE].to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+    print("\n".join(notes))
+    percent = {c: (lambda x: f"{x:.1%}") for c in ("cover95", "ok_cover95")}
+    km = {c: (lambda x: f"{x:.2f}") for c in ("rmse_km", "p95_km", "ok_rmse_km", "ok_p95_km")}
+    lines = [f"**Faults: {name}** (km; `ok_*`: the same float with correct tables):", ""]
+    lines += [markdown_table(table[FAULT_TABLE], {**percent, **km, "clutter": lambda x: f"{x:g}"}), ""]
+    return "\n".join(lines + [f"- {note}" for note in notes])
+
+
+def _print_fault_summary(tables: dict[str, pd.DataFrame]) -> str:
+    """Print, per fault set, how many floats fail each target (`FAULT_TARGET_KEYS`); the report's text."""
+    rows = {
+        name: {key: len(failing) for key, (_, _, failing) in zip(FAULT_TARGET_KEYS, fault_targets(t), strict=True)}
+        for name, t in tables.items()
+    }
+    summary = pd.DataFrame.from_dict(rows, orient="index").rename_axis("faults").reset_index()
+    print("\nfloats failing each target, per fault set:")
+    print(summary.to_string(index=False))
+    return "**Floats failing each target, per fault set:**\n\n" + markdown_table(summary, {})
 
 
 def _seed_report(seed: int | None, runs: pd.DataFrame, notes: list[str], reliability: pd.DataFrame) -> str:

@@ -125,6 +125,19 @@ class FixesConfig:
     launch_sd_km: float = setting("> 0", _positive)
     end_sd_km: float = setting("> 0", _positive)
     use_end_fix: bool = setting()
+    clock_offset_sd_s: float = setting("> 0", _positive)
+
+
+@dataclass(frozen=True)
+class ChecksConfig:
+    """The table values checked against the arrivals (`rafostrack.calibrate.metadata_checks`)."""
+
+    enabled: bool = setting()
+    z_score: float = setting("> 0", _positive)
+    fix_tolerance_km: float = setting("> 0", _positive)
+    clock_tolerance_s: float = setting("> 0", _positive)
+    offset_tolerance_s: float = setting("> 0", _positive)
+    drift_tolerance_s_per_day: float = setting("> 0", _positive)
 
 
 @dataclass(frozen=True)
@@ -235,6 +248,7 @@ class Config:
     recovery: RecoveryConfig
     calibrate: CalibrateConfig
     fixes: FixesConfig
+    checks: ChecksConfig
     filter: FilterConfig
     smoother: SmootherConfig
     ambiguity: AmbiguityConfig

@@ -44,6 +44,10 @@ class BeaconTable:
     sound_speed_m_s: NDArray[np.float64] | None = None
     p_detect: NDArray[np.float64] | None = None
     detection_range_km: NDArray[np.float64] | None = None
+    # Where each row was read (file, and line per row: header = 1), for the metadata checks'
+    # messages; None when the table was built in code.
+    source_file: str | None = None
+    source_line: NDArray[np.int64] | None = None
 
     def __len__(self) -> int:
         return len(self.beacon_id)
@@ -70,7 +74,7 @@ class FloatInfo:
     end_lat: float
     end_lon: float
     clock_offset_start_s: float
-    clock_offset_end_s: float
+    clock_offset_end_s: float  # NaN: not measured (the clock's drift is then estimated)
     window_s: float
     max_signals: int
     # A smooth correction to the linear clock model (knot times, seconds), interpolated
@@ -79,11 +83,15 @@ class FloatInfo:
     # The float's drifting depth (m, positive down; NaN = not given): the sea floor must be
     # deeper (`rafostrack.context`).
     depth_m: float = float("nan")
+    # Where the float's row was read (file, line: header = 1), for the metadata checks'
+    # messages; None when the float was described in code.
+    source: tuple[str, int] | None = None
 
     def clock_offset_s(self, time: NDArray[np.datetime64] | np.datetime64) -> NDArray[np.float64]:
-        """Float clock error (float clock minus true time): linear from launch to end, plus
-        the calibrated residual when there is one."""
-        if np.isnat(self.end_time) or self.end_time <= self.launch_time:
+        """Float clock error (float clock minus true time): linear from launch to end (the
+        start offset throughout when the end offset was not measured), plus the calibrated
+        residual when there is one."""
+        if np.isnat(self.end_time) or self.end_time <= self.launch_time or not self.has_end_clock:
             linear = np.full(np.shape(time), self.clock_offset_start_s)
         else:
             frac = (time - self.launch_time) / (self.end_time - self.launch_time)
@@ -95,6 +103,11 @@ class FloatInfo:
         knots, seconds = self.clock_residual
         at = np.asarray(time, dtype="datetime64[ns]").astype(np.int64).astype(float)
         return linear + np.interp(at, knots.astype("datetime64[ns]").astype(np.int64).astype(float), seconds)
+
+    @property
+    def has_end_clock(self) -> bool:
+        """Whether the clock's offset at the end was measured (floats.csv clock_offset_end_s)."""
+        return not np.isnan(self.clock_offset_end_s)
 
     @property
     def has_end_fix(self) -> bool:

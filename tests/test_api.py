@@ -77,7 +77,7 @@ def test_out_writes_what_the_cli_writes(sim_mission_dir, tmp_path):
 
 
 def test_make_demo_installs_only_the_package():
-    """Issue 14 item 8: `make demo` installed the test and Dask extras it does not use."""
+    """`make demo` installed the test and Dask extras it does not use."""
     text = (ROOT / "Makefile").read_text()
     rule = re.compile(r"^([^\s:#]+):([^=\n]*)\n((?:\t.*\n)*)", re.MULTILINE)
     targets = {m.group(1): (m.group(2).split(), m.group(3)) for m in rule.finditer(text)}

@@ -1,6 +1,6 @@
 """`rafostrack.batch.pool`: local workers import the batch process's own rafostrack whatever
 the current directory holds, and a worker that cannot start says why, in batch.log and the
-summary (issue 14, item 1: "cron breaks batch").
+summary ("cron breaks batch").
 
 Each test runs the installed `rafostrack` entry point as a subprocess, as cron does, on a
 tiny simulated mission (2 floats of 6 days, 50 particles, no plots).

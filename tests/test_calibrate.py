@@ -6,9 +6,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pandas as pd
 import pytest
 from scipy.special import expit
+from support import truth_estimate
 
 from rafostrack.calibrate import CALIBRATED_KEYS, MIN_ARRIVALS, Calibration, calibrate
 from rafostrack.calibrate.detection import MIN_OPPORTUNITIES, fit_detection
@@ -38,18 +38,7 @@ def _first_pass(days: int, seed: int, **model_changes):
     model = dataclasses.replace(CONFIG.model, sound_speed_m_s=C_TRUE, toa_sigma_s=1.0, clutter_rate=0.5)
     model = dataclasses.replace(model, **model_changes)
     sim = simulate_mission(beacons, [info], model, np.random.default_rng(seed)).floats[0]
-    labels = pd.DataFrame(
-        [
-            (w.time, j + 1, t, b, 1.0 if b is not None else 0.0)
-            for w in sim.record.windows
-            for j, (t, b) in enumerate(zip(w.toa_s, w.beacon_id, strict=True))
-        ],
-        columns=["time", "rank", "toa_s", "beacon_id", "prob"],
-    )
-    times = np.array([w.time for w in sim.record.windows], dtype="datetime64[ns]")
-    at = sim.truth.set_index("time").loc[times]
-    track = pd.DataFrame({"time": times, "lat": at["lat"].to_numpy(), "lon": at["lon"].to_numpy(), "ambiguous": False})
-    return Estimate("smoothed", track, labels, pd.DataFrame()), sim.record, beacons, sim.info
+    return truth_estimate(sim), sim.record, beacons, sim.info
 
 
 @pytest.fixture(scope="module")

@@ -138,7 +138,7 @@ def _prior(problem: kalman.Problem, days: np.ndarray, hyper: kalman.Hyper, prior
         draw(axis, problem.launch_sd_km)
         m[2 + axis] = m[base + axis]
         draw(2 + axis, sd)
-    draw(4, priors.clock_fix_s)
+    draw(4, problem.clock_sd_s[0])
     draw(5, priors.clock_rate_s_per_day)
     east, north = local_offsets_km(problem.lat[1:], problem.lon[1:], problem.lat[:-1], problem.lon[:-1])
     for k in range(k_nodes - 1):
@@ -178,7 +178,7 @@ def _dense(problem, days, u, weight, hyper, priors):
         select[[0, 1, 2], [last, last + 1, last + 4]] = 1.0
         obs.append(select)
         y.append(np.zeros(3))
-        var.append(np.array([problem.end_sd_km**2, problem.end_sd_km**2, priors.clock_fix_s**2]))
+        var.append(np.array([problem.end_sd_km**2, problem.end_sd_km**2, problem.clock_sd_s[1] ** 2]))
     h, y, r = np.vstack(obs), np.concatenate(y), np.concatenate(var)
     p = m @ m.T
     s = h @ p @ h.T + np.diag(r)
@@ -515,3 +515,12 @@ def test_a_simulated_float_recovers_its_timing_nuisances(seed):
     d2 = np.einsum("ki,kij,kj->k", err, np.linalg.inv(fit.position_cov_km2), err)
     assert np.mean(d2 < chi2.ppf(0.95, 2)) >= 0.8
     assert 0.2 <= np.mean(d2 < chi2.ppf(0.5, 2)) <= 0.9
+
+
+def test_leaving_sources_out_keeps_each_sources_released_prior():
+    """`without_sources` drops the left-out sources' entries of `released` with them."""
+    problem, _ = _small_problem(seed=6, end_fix=True, n_nodes=12, n_heard=4)
+    problem = dataclasses.replace(problem, released=np.array([False, True, False, True]))
+    kept, _ = without_sources(problem, np.zeros(4), np.array([True, False, False, False]))
+    assert kept.released.tolist() == [True, False, True]
+    kalman.linearise(kept, np.zeros(kept.n_unknowns), np.ones(len(kept.toa_s)), kalman.KalmanPriors())

@@ -271,7 +271,7 @@ def test_cli_warnings_listed_in_run_json_and_stderr(sim_mission_dir, tmp_path):
 
 
 # --------------------------------------------------------------------------------------
-# Issue 14 item 7: usage errors are the documented one line too
+# Usage errors are the documented one line too
 
 
 @pytest.mark.parametrize(
@@ -324,7 +324,7 @@ def test_missing_floats_csv_names_launch(sim_mission_dir, tmp_path):
 
 
 # --------------------------------------------------------------------------------------
-# Issue 14 item 4: progress on a terminal; the printed time includes the plots
+# Progress on a terminal; the printed time includes the plots
 
 
 def _slow_plots(seconds: float):
@@ -371,7 +371,7 @@ def test_progress_bar_on_a_terminal_only(sim_mission_dir, tmp_path, monkeypatch)
 
 
 def test_config_command_prints_the_merged_configuration_with_sources(sim_mission_dir, tmp_path):
-    """Issue 14 item 8: `rafostrack config [MISSION]`."""
+    """`rafostrack config [MISSION]`."""
     import tomllib
 
     from rafostrack.config import load_config

@@ -155,7 +155,7 @@ def test_report_from_summaries(outdir):
 
 
 def test_quick_mode_is_the_full_method_only_smaller():
-    """Issue 14 item 2: `make figures-quick` showed the method failing (fewer particles than the
+    """`make figures-quick` showed the method failing (fewer particles than the
     method needs) where the full run reproduced the paper. Quick mode now cuts replication
     (repeats, clutter levels, seeds) and record length only: every per-run setting the method's
     behaviour depends on (particles, trajectory, clutter, seeds) is the full run's."""

@@ -46,7 +46,7 @@ def _names(directory) -> set[str]:
 
 
 def test_rerun_leaves_only_the_current_runs_files_atomically(sim_mission_dir, tmp_path, monkeypatch):
-    """Issue 14 item 3: a rerun into the same directory left the previous run's files (an old
+    """A rerun into the same directory left the previous run's files (an old
     track_filtered.parquet, old PNGs) beside the new ones. The float directory is now built
     beside the old one and swapped in whole; a run that fails leaves the old one untouched."""
     import rafostrack.plots

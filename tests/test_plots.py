@@ -163,7 +163,7 @@ def test_beacon_colors_distinct_and_not_grey():
 
 
 # --------------------------------------------------------------------------------------
-# Issue 14 item 5: the map and the other plots, read back from the drawn figure
+# The map and the other plots, read back from the drawn figure
 
 
 def _capture(monkeypatch, module):
@@ -336,7 +336,7 @@ def test_ciede2000_oracle_matches_published_pairs():
 
 
 def test_twenty_beacon_colours_are_told_apart():
-    """Issue 14 item 5: beacons sharing tab20's light/dark pairs were hard to tell apart. Every
+    """Beacons sharing tab20's light/dark pairs were hard to tell apart. Every
     two of the first 20 beacon colours, and each against the clutter grey and the white
     background, differ by at least 20 CIEDE2000 units (tab20's own pairs: 12)."""
     from matplotlib.colors import to_rgb

@@ -284,7 +284,7 @@ def _draw_arrivals_panel(
 
 # Quick mode (CI) runs exactly the full runs here: one target each, and the particle count,
 # trajectory and clutter are what the method's behaviour depends on (at 400 particles the quick
-# figures showed the method failing where the full ones did not: issue 14 item 2).
+# figures showed the method failing where the full ones did not).
 LINE = TrajectoryFigure(
     "fig4_line", "line", "Fig. 4, straight line", TrajectorySizes(60, 1000), TrajectorySizes(60, 1000)
 )

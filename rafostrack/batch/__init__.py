@@ -11,6 +11,8 @@ One module per step, each stating in its docstring what it guarantees:
 - `pool`: the floats in local worker processes (`--jobs`) or on a Dask cluster (`--scheduler`).
 - `lock`: one run at a time per OUT, by a kernel lock that a killed run cannot leave behind.
 - `report`: progress bar or plain lines, the summary table, `batch-summary.csv`, `batch.log`.
+- `findings`: the table values the arrivals contradict, per mission, a source's once for all
+  the floats that hear it (`metadata-findings.csv`).
 - `run`: `run_batch`, the whole run in order.
 """
 

@@ -1,4 +1,5 @@
-"""What a batch run tells: progress, the summary table, `batch-summary.csv` and `batch.log`.
+"""What a batch run tells: progress, the summary table, `batch-summary.csv`, `batch.log`, and
+the metadata findings (`metadata-findings.csv`).
 
 Guarantees:
 
@@ -10,6 +11,9 @@ Guarantees:
 - The summary table lists every float processed or failed, with its reason, and the totals
   (skipped floats are counted; all floats are listed in `batch-summary.csv`, one row each,
   columns `SUMMARY_COLUMNS`). `run.py` writes both files atomically at the end of the run.
+- The metadata findings (`findings.py`): one line per table value the arrivals contradict,
+  printed at the end, and `metadata-findings.csv` (columns `FINDINGS_COLUMNS`; a header
+  only when there is none), which `run.py` writes atomically beside `batch-summary.csv`.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from typing import TextIO
 
 from tqdm import tqdm
 
+from .findings import FINDINGS_NAME, batch_findings, findings_csv
 from .plan import FAILED, PROCESSED, SKIPPED, FloatOutcome
 
 SUMMARY_NAME = "batch-summary.csv"
@@ -117,7 +122,9 @@ def summary_table(outcomes: Sequence[FloatOutcome], elapsed_s: float, out: Path)
         f"{len(outcomes)} floats: {counts[PROCESSED]} processed, {counts[SKIPPED]} skipped"
         f"{f' ({unchanged} unchanged)' if unchanged else ''}, {counts[FAILED]} failed in {elapsed_s:.1f} s"
     )
-    lines.append(f"summary: {Path(out) / SUMMARY_NAME}  log: {Path(out) / LOG_NAME}")
+    lines.append(
+        f"summary: {Path(out) / SUMMARY_NAME}  log: {Path(out) / LOG_NAME}  findings: {Path(out) / FINDINGS_NAME}"
+    )
     return "\n".join(lines)
 
 
@@ -129,3 +136,19 @@ def summary_csv(outcomes: Sequence[FloatOutcome]) -> str:
     for outcome in outcomes:
         writer.writerow(outcome.row())
     return buf.getvalue()
+
+
+def report_findings(reporter: Reporter, outcomes: Sequence[FloatOutcome], out: Path) -> str:
+    """Print the metadata findings of the floats' run.json files, one line each (stderr and
+    batch.log), and return the text of metadata-findings.csv."""
+    findings, unreadable = batch_findings(outcomes)
+    for line in unreadable:
+        reporter.log(line)
+    path = Path(out) / FINDINGS_NAME
+    if not findings:
+        reporter.log(f"metadata findings: no table value contradicted by the arrivals ({path})", console=False)
+    else:
+        reporter.log(f"metadata findings: {len(findings)} table value(s) contradicted by the arrivals ({path}):")
+    for finding in findings:
+        reporter.log(finding.message())
+    return findings_csv(findings)

@@ -7,7 +7,8 @@ Guarantees:
   anything is written in OUT.
 - Everything that writes in OUT happens while holding OUT's lock (`lock.py`): first the
   temporary directories and files a killed run left in OUT are removed, then the floats are
-  planned and run, then `batch-summary.csv` and `batch.log` are written atomically.
+  planned and run, then `batch-summary.csv`, `metadata-findings.csv` and `batch.log` are
+  written atomically.
 - The result's exit code is 0 when no float failed, 1 when some did.
 """
 
@@ -31,7 +32,7 @@ from .discover import Mission, discover
 from .lock import BatchLock
 from .plan import FAILED, SKIPPED, FloatOutcome, plan
 from .pool import dask_client, run_dask, run_local
-from .report import LOG_NAME, SUMMARY_NAME, Reporter, summary_csv, summary_table
+from .report import FINDINGS_NAME, LOG_NAME, SUMMARY_NAME, Reporter, report_findings, summary_csv, summary_table
 
 _STALE_DIR = re.compile(r"^\..+\.(tmp|trash)-\d+$")  # .<float_id>.tmp-<pid>, .<float_id>.trash-<pid>
 _STALE_FILE = re.compile(r"^\..+\.tmp$")  # atomic_path's temporary files
@@ -170,9 +171,11 @@ def _run_locked(
     finally:
         reporter.finish()
     outcomes.sort(key=lambda o: (o.mission, o.float_id))
+    findings = report_findings(reporter, outcomes, out)
     table = summary_table(outcomes, time.monotonic() - started, out)
     reporter.lines.extend(table.splitlines())
     write_text_atomic(out / SUMMARY_NAME, summary_csv(outcomes))
+    write_text_atomic(out / FINDINGS_NAME, findings)
     write_text_atomic(out / LOG_NAME, "\n".join(reporter.lines) + "\n")
     return outcomes, table
 

@@ -38,7 +38,9 @@ from ..summaries.estimates import Estimate
 from . import kalman
 from .association import fit_association
 from .detection import fit_detection, heard_nowhere
+from .metadata_checks import CONTRADICTED, MetadataCheck, end_alternatives, timing_checks
 from .noise import direct_probability, fit_multipath
+from .release import released_problem, used, with_supported_clock, with_supported_fixes
 from .timing_problem import (
     MIN_ARRIVALS as MIN_ARRIVALS,
 )
@@ -97,6 +99,7 @@ class Calibration:
     nuisance_time: NDArray[np.datetime64] = field(default_factory=lambda: np.zeros(0, "datetime64[ns]"))
     nuisance_cov_km2: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2, 2)))
     hyper: kalman.Hyper | None = None  # the Kalman smoother's fitted hyperparameters
+    checks: tuple[MetadataCheck, ...] = ()  # the table values against the arrivals (`metadata_checks`)
 
     def apply(self, config: Config) -> Config:
         """`config` with the estimated keys set."""
@@ -185,6 +188,8 @@ class _TimingFit:
     fit: kalman.KalmanFit
     left_out: dict[str, int]  # source: its confident arrivals (`hinging_sources`)
     multipath_fraction: float  # the last multipath EM estimate (where the association fit starts)
+    priors: kalman.KalmanPriors
+    mid: NDArray[np.float64]  # the drift reference of each source (days)
 
 
 @dataclass(frozen=True)
@@ -222,17 +227,27 @@ def calibrate(
     if built is None:
         return None
     timing = _fit_timing(built, problem, start)
+    checks: list[MetadataCheck] = []
+    info = problem.info
+    if problem.config.checks.enabled:
+        checks = timing_checks(timing.problem, timing.fit, timing.priors, timing.heard, timing.mid, problem.beacons,
+                               problem.info, problem.config.checks)  # fmt: skip
+        if any(c.outcome == CONTRADICTED for c in checks):
+            timing, checks, info = _released_fit(estimate, checks, problem, timing.fit.hyper)
+        checks = [used(c) for c in checks]
     fit = timing.fit
     values = _quantised(_timing_values(fit))
     corrected = corrected_beacons(problem.beacons, timing.heard, fit, _speeds_fitted(problem.config))
-    clocked = dataclasses.replace(problem.info, clock_residual=(timing.problem.time, fit.clock_s))
+    clocked = with_supported_fixes(dataclasses.replace(info, clock_residual=(timing.problem.time, fit.clock_s)), checks)
     timed = _with_values(problem.config, values).model
     detection = _fit_detection(estimate, record, problem, corrected, clocked, timed)
     associated, association_report = _fit_noise(record, timing, detection.beacons, clocked, timed)
     values |= _quantised(_association_values(associated))
     values = {k: v for k, v in values.items() if k not in problem.config.explicit}
     report = _report(timing, values, problem, detection, association_report)
-    return Calibration(values, detection.beacons, clocked, report, timing.problem.time, fit.nuisance_cov_km2, fit.hyper)
+    return Calibration(
+        values, detection.beacons, clocked, report, timing.problem.time, fit.nuisance_cov_km2, fit.hyper, tuple(checks)
+    )
 
 
 def _speeds_fitted(config: Config) -> bool:
@@ -273,7 +288,23 @@ def _fit_timing(
         timing, mid = without_sources(timing, mid, hinging)
         heard = heard[~hinging]
         fit = kalman.fit(timing, fit.hyper, noise.weight_of, mid, priors=priors, hyper_lower=lower)
-    return _TimingFit(timing, heard, fit, left_out, noise.model.multipath_fraction)
+    return _TimingFit(timing, heard, fit, left_out, noise.model.multipath_fraction, priors, mid)
+
+
+def _released_fit(
+    estimate: Estimate, checks: list[MetadataCheck], problem: FloatProblem, start: kalman.Hyper
+) -> tuple[_TimingFit, list[MetadataCheck], FloatInfo]:
+    """The timing fit with every contradicted value released (`release`): the float clock's
+    offsets set to the arrivals' values, the others' priors widened; where the checks allow
+    two readings (`end_alternatives`), the one of higher evidence. The fit, its reading and
+    the float's description it was fitted with."""
+    fits = []
+    for reading in end_alternatives(checks):
+        info = with_supported_clock(problem.info, reading)
+        built = timing_problem(estimate, problem.beacons, info, problem.config)
+        assert built is not None  # the same labels gave the first fit
+        fits.append((_fit_timing(released_problem(built, reading, problem.beacons), problem, start), reading, info))
+    return max(fits, key=lambda fit: fit[0].fit.log_evidence)
 
 
 def _timing_values(fit: kalman.KalmanFit) -> dict[tuple[str, str], float]:

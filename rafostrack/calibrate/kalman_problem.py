@@ -38,7 +38,10 @@ class KalmanPriors:
     beacon_sound_speed_m_s: float = 2.0
     offset_s: float = 3.0
     drift_s_per_day: float = 0.01
-    clock_fix_s: float = 0.5
+    # A source whose offset or drift the metadata checks found contradicted by the arrivals
+    # (`Problem.released`): its corrections are the data's, under these wide priors.
+    released_offset_s: float = 300.0
+    released_drift_s_per_day: float = 0.2
     clock_rate_s_per_day: float = 0.1  # of the clock residual's rate at launch
     mean_current_km_per_day: float = 20.0
 
@@ -93,6 +96,10 @@ class Problem:
     beacon_lat: NDArray[np.float64]  # (H,) heard beacons
     beacon_lon: NDArray[np.float64]
     slowness_s_per_m: float  # s0 = 1 / configured sound speed
+    # The clock residual's prior sd where the clock was measured: at launch, and at the end
+    # fix (None: the end offset was not measured, no row).
+    clock_sd_s: tuple[float, float | None] = (0.5, 0.5)
+    released: NDArray[np.bool_] | None = None  # (H,) sources under `KalmanPriors.released_*`
 
     @property
     def n_nodes(self) -> int:
@@ -285,31 +292,37 @@ def _motion(problem: Problem, u: NDArray, hyper: Hyper, priors: KalmanPriors, ro
     for axis in range(2):
         _prior_row(rows, u, axis, problem.launch_sd_km)
         _prior_row(rows, u, VELOCITY + axis, sd, mean_col=vbar + axis)
-    _prior_row(rows, u, CLOCK, priors.clock_fix_s)
+    _prior_row(rows, u, CLOCK, problem.clock_sd_s[0])
     _prior_row(rows, u, RATE, priors.clock_rate_s_per_day)
 
 
 def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> None:
     """Priors of the static parameters (slowness sds from sound-speed sds: ds = -dc / c^2)."""
     s0 = problem.slowness_s_per_m
+    released = np.zeros(problem.n_heard, dtype=bool) if problem.released is None else problem.released
     for idx, sd in (
         (np.array([problem.vbar, problem.vbar + 1]), priors.mean_current_km_per_day),
         (np.array([problem.ds]), priors.sound_speed_m_s * s0 * s0),
-        (problem.per_beacon(0), priors.offset_s),
-        (problem.per_beacon(1), priors.drift_s_per_day),
+        (problem.per_beacon(0), np.where(released, priors.released_offset_s, priors.offset_s)),
+        (problem.per_beacon(1), np.where(released, priors.released_drift_s_per_day, priors.drift_s_per_day)),
         (problem.per_beacon(2), priors.beacon_sound_speed_m_s * s0 * s0),
     ):
-        rows.add(u[idx] / sd, [(idx, np.full(len(idx), 1 / sd))], -len(idx) * float(np.log(sd)))
+        sds = np.broadcast_to(np.asarray(sd, dtype=float), idx.shape)
+        rows.add(u[idx] / sds, [(idx, 1 / sds)], -float(np.sum(np.log(sds))))
 
 
-def _end_fix(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> int:
-    """The end fix's rows (data): position and clock at the last node. Returns their count."""
+def _end_fix(problem: Problem, u: NDArray, rows: Rows) -> int:
+    """The end fix's rows (data): position and, where it was measured, the clock at the last
+    node. Returns their count."""
     if problem.end_sd_km is None:
         return 0
     last = NODE * (problem.n_nodes - 1)
     for axis in range(2):
         _prior_row(rows, u, last + axis, problem.end_sd_km)
-    _prior_row(rows, u, last + CLOCK, priors.clock_fix_s)
+    end_clock_sd = problem.clock_sd_s[1]
+    if end_clock_sd is None:
+        return 2
+    _prior_row(rows, u, last + CLOCK, end_clock_sd)
     return 3
 
 
@@ -382,7 +395,7 @@ def linearise(problem: Problem, u: NDArray, weight: NDArray, priors: KalmanPrior
     arrivals = Rows()
     toa_residual = _measurements(problem, u, weight, arrivals)
     fixed = Rows()
-    n_end = _end_fix(problem, u, priors, fixed)
+    n_end = _end_fix(problem, u, fixed)
     _statics(problem, u, priors, fixed)
     return Linearised(
         problem,

@@ -69,6 +69,7 @@ def timing_problem(
         beacon_lat=beacons.lat[heard],
         beacon_lon=beacons.lon[heard],
         slowness_s_per_m=1.0 / config.model.sound_speed_m_s,
+        clock_sd_s=(config.fixes.clock_offset_sd_s, config.fixes.clock_offset_sd_s if info.has_end_clock else None),
     )
     return problem, heard, mid
 
@@ -100,6 +101,7 @@ def without_sources(
         drift_days=problem.drift_days[keep],
         beacon_lat=problem.beacon_lat[~drop],
         beacon_lon=problem.beacon_lon[~drop],
+        released=None if problem.released is None else problem.released[~drop],
     ), mid[~drop]
 
 

@@ -64,6 +64,8 @@ def read_beacons(path: Path) -> BeaconTable:
         drift_s_per_day=drift,
         start=start,
         end=end,
+        source_file=str(path),
+        source_line=np.array([line_of(frame, row) for row in range(len(frame))], dtype=np.int64),
     )
 
 
@@ -136,10 +138,11 @@ def read_floats(path: Path, model: ModelConfig) -> dict[str, FloatInfo]:
             end_lat=float(end_lat[row]),
             end_lon=float(end_lon[row]),
             clock_offset_start_s=float(clock0[row]),
-            clock_offset_end_s=float(clock0[row] if np.isnan(clock1[row]) else clock1[row]),
+            clock_offset_end_s=float(clock1[row]),
             window_s=float(window[row]),
             max_signals=int(max_sig[row]),
             depth_m=float(depth[row]),
+            source=(str(path), line_of(frame, row)),
         )
     return floats
 

@@ -1,4 +1,4 @@
-"""Correlation height as evidence of source vs clutter (issue 14: use the quality column).
+"""Correlation height as evidence of source vs clutter.
 
 A RAFOS float stores, with each arrival time, the height of the correlation peak that
 detected it (Argo's `COR`, our `quality`). A source's signal correlates well with the

@@ -25,6 +25,8 @@ import time
 from collections.abc import Callable
 
 from ..calibrate import Calibration, calibrate
+from ..calibrate.launch_check import launch_check
+from ..calibrate.metadata_checks import CONTRADICTED, MetadataCheck, warnings_of
 from ..config import Config, with_overrides
 from ..domain import ArrivalRecord
 from ..problem import FloatProblem
@@ -73,11 +75,27 @@ def track_record(
     passes = 1 + config.calibrate.iterations if config.calibrate.enabled else 1
     told = _pass_progress(progress, passes)
     if config.calibrate.enabled:
-        out, final = _calibrated_method(problem, record, passes, told, also_filtered)
+        checked = launch_check(problem, record) if config.checks.enabled else None
+        tracked = problem if checked is None else checked[1]
+        out, final = _calibrated_method(tracked, record, passes, told, also_filtered)
+        if checked is not None and checked[0].outcome == CONTRADICTED:
+            out = _with_launch_check(out, checked[0])
     else:
         out = Tracker.from_problem(problem).track(record, also_filtered=also_filtered, progress=told(1))
         final = problem
     return dataclasses.replace(out, problem=final)
+
+
+def _with_launch_check(out: TrackOutput, check: MetadataCheck) -> TrackOutput:
+    """`out` with the gross launch check (`calibrate.launch_check`) in place of the finer one,
+    which weighed the moved launch, not the table's."""
+    checks = [c for c in out.metadata_checks if c["field"] != "launch_fix"]
+    warning = check.warning()
+    return dataclasses.replace(
+        out,
+        metadata_checks=(check.as_json(), *checks),
+        warnings=[*([warning] if warning else []), *out.warnings],
+    )
 
 
 def _pass_progress(progress: Callable[[int, int, str], None] | None, passes: int) -> PassProgress:
@@ -110,6 +128,8 @@ def _calibrated_method(
     out = dataclasses.replace(
         out,
         calibration=report,
+        metadata_checks=tuple(check.as_json() for check in calibration.checks),
+        warnings=[*out.warnings, *warnings_of(calibration.checks)],
         filter_s=spent["filter_s"] + out.filter_s,
         smoother_s=spent["smoother_s"] + out.smoother_s,
         calibrate_s=spent["calibrate_s"],

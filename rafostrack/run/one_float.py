@@ -297,6 +297,7 @@ def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, el
         "smoother_s": round(output.smoother_s, 3),
         "calibrate_s": round(output.calibrate_s, 3),
         "calibration": output.calibration,
+        "metadata_checks": list(output.metadata_checks),
         "ess": _ess_summary(np.array(output.filter_ess), config.filter.particles),
         "counts": {
             "windows": len(output.track),

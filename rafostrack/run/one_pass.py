@@ -57,6 +57,9 @@ class TrackOutput:
     # `run.method.track_record`.
     problem: FloatProblem | None = None
     smoother: str = "none"  # which smoother made the estimate: "ffbsm", "two_filter" or "none"
+    # The table values weighed against the arrivals (`calibrate.metadata_checks`), as run.json
+    # lists them; set by `run.method.track_record`.
+    metadata_checks: tuple[dict[str, Any], ...] = ()
 
     @property
     def track(self) -> pd.DataFrame:

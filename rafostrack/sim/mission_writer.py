@@ -1,16 +1,18 @@
 """Write a simulated mission as a CSV mission directory `rafostrack track` reads.
 
 beacons.csv, floats.csv, one arrival file per float (with the true labels as hand labels),
-truth/<float_id>.csv and a rafostrack.toml holding the simulated measurement model.
-Every file is written atomically.
+truth/<float_id>.csv and a rafostrack.toml holding the simulated measurement model; the
+stress generator's metadata faults in truth/faults.json. Every file is written atomically.
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 import tomllib
+from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,6 +26,7 @@ from ..io.atomic import write_text_atomic
 from ..io.config_report import toml_value
 
 if TYPE_CHECKING:
+    from .faults import InjectedFault
     from .simulate import SimulatedMission
 
 _TOA_DECIMALS = 2  # the files' resolution (0.01 s)
@@ -146,3 +149,10 @@ def write_mission_files(
             )
         ]
         write_text_atomic(outdir / "truth" / f"{info.float_id}.csv", _csv(["time", "lat", "lon"], truth_rows))
+
+
+def write_faults(faults: Sequence[InjectedFault], outdir: Path) -> None:
+    """truth/faults.json: the metadata faults written in the tables, one object per fault
+    (kind, file, id, field, true, written; `faults.InjectedFault`), [] when none was drawn."""
+    text = json.dumps([f.to_json() for f in faults], indent=2) + "\n"
+    write_text_atomic(Path(outdir) / "truth" / "faults.json", text)

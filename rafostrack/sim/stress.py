@@ -23,7 +23,12 @@ phenomenon an independent knob of `StressConfig`, intensities drawn per float or
   after it; their label is their beacon;
 - source outages: one or two beacons silent for 20-60 days, not stated in beacons.csv;
 - clocks: the float clock wanders smoothly (+-1-3 s) about the linear model given in
-  floats.csv; each source's clock drifts +-0.01 s/day from its catalogue value;
+  floats.csv, which drifts from the launch's offset to the end's (within +-2 s, or by
+  `clock_end_offset_s` like real floats); each source's clock drifts +-0.01 s/day from its
+  catalogue value;
+- floats that never surfaced (`never_surfaced_share`): no end fix and no end clock;
+- metadata faults (`faults`, see `rafostrack.sim.faults`): wrong or missing values written in
+  floats.csv and beacons.csv, recorded in `truth/faults.json`; the truth is unchanged;
 - sound speed: the truth's effective sound speed differs from the tracker's default (1480
   m/s) by a per-geometry amount, and per beacon by a little more;
 - TOA noise: Student-t (5 dof) scaled to a per-float sd of 1.5-3 s;
@@ -33,8 +38,11 @@ The float stores the earliest `max_signals` signals of its window.
 
 All randomness comes from one `numpy.random.Generator`, drawn in a fixed order (the
 geometry's beacons, then float by float: launch, drift, events, then window by window), so
-a seed gives byte-identical files. `truth/<float_id>.json` records what happened to each
-float (gaps, outages, eddies met, multipath fraction, true sound speed, ...).
+a seed gives byte-identical files. The knobs added later draw from their own generators,
+children of the same seed (`substream`: the end clocks and surfacing float by float, then
+the faults), so that turning them on leaves every other draw as it was.
+`truth/<float_id>.json` records what happened to each float (gaps, outages, eddies met,
+multipath fraction, true sound speed, ...).
 """
 
 from __future__ import annotations
@@ -50,14 +58,17 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from ..domain import ArrivalRecord, BeaconTable, FloatInfo, Window
+from ..domain import ArrivalRecord, BeaconTable, FloatInfo, NaT, Window
 from ..io.atomic import write_text_atomic
 from ..model.geodesy import range_m
+from .faults import CLOCK_KINDS, SOURCE_KINDS, InjectedFault, SourceSetting, apply_faults, check_kinds, draw_faults
 from .stress_world import DAY_NS, GEOMETRIES, Eddy, Geometry, catalogue, launch_position, simulate_track
 
 TOA_DECIMALS = 2
 DEFAULT_SOUND_SPEED_M_S = 1480.0
 MAX_DRAWS = 200  # the tracker's default: the truth differs from it
+CLOCK_STREAM, FAULT_STREAM = 32, 33  # `substream` keys: end clocks and surfacing; faults
+MIN_HEARD_SHARE = 0.2  # a source fault's candidates: heard in this share of every float's windows
 
 
 @dataclass(frozen=True)
@@ -97,6 +108,16 @@ class StressConfig:
     # float clock
     clock_wander: bool = True
     clock_wander_s: tuple[float, float] = (1.0, 3.0)
+    # The true clock's offset at the end (s), uniform in this range and written in floats.csv,
+    # e.g. (-40, 40) (the public DIMES floats' end offsets: -66..+45 s, median -3 s); None:
+    # within +-2 s like the launch's. The clock faults need it.
+    clock_end_offset_s: tuple[float, float] | None = None
+    # Share of the floats that never surfaced: no end fix and no end clock in floats.csv.
+    never_surfaced_share: float = 0.0
+    # Metadata faults written in the tables (`rafostrack.sim.faults.FAULT_KINDS`), and the
+    # share of the floats each float kind hits.
+    faults: tuple[str, ...] = ()
+    fault_float_share: float = 1.0
     # sound speed
     sound_speed_mismatch: bool = True
     beacon_sound_speed_sd_m_s: float = 2.0
@@ -116,6 +137,13 @@ class StressConfig:
             raise ValueError(
                 f"StressConfig: days must be at least {shortest} with gaps (got {self.days}); or gaps=False"
             )
+        check_kinds(self.faults)
+        clock_faults = sorted(set(self.faults) & set(CLOCK_KINDS))
+        if clock_faults and self.clock_end_offset_s is None:
+            raise ValueError(
+                f"StressConfig: the clock faults ({', '.join(clock_faults)}) need clock_end_offset_s "
+                "(a true clock that drifted)"
+            )
 
 
 @dataclass(frozen=True)
@@ -128,9 +156,22 @@ class StressFloat:
 
 @dataclass(frozen=True)
 class StressMission:
+    """A mission: its correct tables (`beacons`, the floats' `info`) and the metadata faults
+    written over them (None: none asked for; `written_tables` gives the tables as written)."""
+
     geometry: str
-    beacons: BeaconTable  # as the tracker sees them (catalogue offsets and drifts)
+    beacons: BeaconTable  # the catalogue (offsets and drifts), as it should be written
     floats: list[StressFloat]
+    faults: tuple[InjectedFault, ...] | None = None
+
+
+def substream(rng: np.random.Generator, key: int) -> np.random.Generator:
+    """A generator of its own for the seed `rng` was made from: the child `key` of its seed
+    sequence, whatever `rng` has drawn (and drawing nothing from it)."""
+    seq = rng.bit_generator.seed_seq
+    if not isinstance(seq, np.random.SeedSequence):
+        raise ValueError("the stress generator needs a Generator made from a seed (np.random.default_rng(seed))")
+    return np.random.default_rng(np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, key)))
 
 
 # --------------------------------------------------------------------------------------
@@ -237,20 +278,52 @@ def _draw_float(
                        wander_period=wander_period, wander_phase=wander_phase, outages=outages)  # fmt: skip
 
 
+def _end_clock(
+    clock: tuple[float, float], cfg: StressConfig, side: np.random.Generator
+) -> tuple[tuple[float, float], bool]:
+    """The true clock offsets (launch, end), the end's drawn in `clock_end_offset_s` when
+    set, and whether the float surfaced; both drawn from `side` whatever the knobs."""
+    u, surfaced = side.random(), bool(side.random() >= cfg.never_surfaced_share)
+    if cfg.clock_end_offset_s is not None:
+        low, high = cfg.clock_end_offset_s
+        clock = (clock[0], low + u * (high - low))
+    return clock, surfaced
+
+
+def _float_info(
+    float_id: str, draws: _FloatDraws, clock: tuple[float, float], surfaced: bool, geometry: Geometry,
+    cfg: StressConfig,
+) -> FloatInfo:  # fmt: skip
+    """floats.csv's row: launch and end fixes, the clock offsets to 0.01 s (no end fix and
+    no end clock for a float that never surfaced)."""
+    start = np.datetime64(geometry.start, "D").astype("datetime64[ns]")
+    end_time, end_lat, end_lon, end_clock_s = NaT, math.nan, math.nan, math.nan
+    if surfaced:
+        end_time, end_clock_s = start + cfg.days * DAY_NS, round(float(clock[1]), 2)
+        end_lat, end_lon = float(draws.truth["lat"].iloc[-1]), float(draws.truth["lon"].iloc[-1])
+    return FloatInfo(
+        float_id, start, draws.launch[0], draws.launch[1], end_time, end_lat, end_lon, round(float(clock[0]), 2),
+        end_clock_s, geometry.window_s, cfg.max_signals,
+    )  # fmt: skip
+
+
 def simulate_float(
-    float_id: str, beacons: BeaconTable, geometry: Geometry, cfg: StressConfig, rng: np.random.Generator
+    float_id: str,
+    beacons: BeaconTable,
+    geometry: Geometry,
+    cfg: StressConfig,
+    rng: np.random.Generator,
+    side: np.random.Generator | None = None,
 ) -> StressFloat:
-    """One float: launch, drift, events, then its windows in time order."""
+    """One float: launch, drift, events, then its windows in time order; its end clock and
+    surfacing from `side` (default: `substream(rng, CLOCK_STREAM)`)."""
     start = np.datetime64(geometry.start, "D").astype("datetime64[ns]")
     draws = _draw_float(float_id, beacons, geometry, cfg, start + DAY_NS * np.arange(cfg.days + 1), rng)
     days, gaps = _window_days(cfg, rng)
-    clock = tuple(rng.uniform(-2.0, 2.0, 2))
+    launch_clock, end_clock = rng.uniform(-2.0, 2.0, 2)
+    clock, surfaced = _end_clock((float(launch_clock), float(end_clock)), cfg, side or substream(rng, CLOCK_STREAM))
     truth = draws.truth
-    info = FloatInfo(
-        float_id, start, draws.launch[0], draws.launch[1], start + cfg.days * DAY_NS,
-        float(truth["lat"].iloc[-1]), float(truth["lon"].iloc[-1]), round(float(clock[0]), 2),
-        round(float(clock[1]), 2), geometry.window_s, cfg.max_signals,
-    )  # fmt: skip
+    info = _float_info(float_id, draws, clock, surfaced, geometry, cfg)
     bad = np.zeros(len(beacons), dtype=bool)
     windows = []
     for d in days:
@@ -260,7 +333,7 @@ def simulate_float(
         windows.append(_window(int(d), start, draws, clock, bad, beacons, geometry, cfg, rng))
     record = ArrivalRecord(float_id, Path(f"{float_id}.csv"), tuple(windows))
     kept = np.concatenate([[0], days, [cfg.days]]) if days[-1] != cfg.days else np.concatenate([[0], days])
-    events = _events(draws, beacons, geometry, cfg, gaps)
+    events = {**_events(draws, beacons, geometry, cfg, gaps), **_clock_events(clock, surfaced, cfg)}
     return StressFloat(info, record, truth.iloc[np.unique(kept)].reset_index(drop=True), events)
 
 
@@ -375,25 +448,72 @@ def _events(
     }
 
 
+def _clock_events(clock: tuple[float, float], surfaced: bool, cfg: StressConfig) -> dict[str, Any]:
+    """The true clock offsets (launch, end) and whether the float surfaced, when the knobs
+    that set them are on (nothing otherwise: the files stay as they were)."""
+    if cfg.clock_end_offset_s is None and cfg.never_surfaced_share == 0:
+        return {}
+    return {"true_clock_offset_s": [round(float(c), 4) for c in clock], "surfaced": surfaced}
+
+
+def heard_sources(mission: StressMission, at_least: int = 1) -> list[str]:
+    """The sources heard (true labels) in at least `MIN_HEARD_SHARE` of every float's
+    windows, best heard first; at least the `at_least` best heard."""
+    ids = [str(b) for b in mission.beacons.beacon_id]
+    share = np.ones(len(ids))
+    for f in mission.floats:
+        heard = [set(w.beacon_id or ()) for w in f.record.windows]
+        share = np.minimum(share, np.array([np.mean([b in h for h in heard]) if heard else 0.0 for b in ids]))
+    order = np.argsort(-share, kind="stable")
+    n = max(int(np.sum(share >= MIN_HEARD_SHARE)), min(at_least, len(ids)))
+    return [ids[i] for i in order[:n]]
+
+
+def with_faults(mission: StressMission, cfg: StressConfig, rng: np.random.Generator) -> StressMission:
+    """`mission` with the faults `cfg.faults` (drawn from `rng`; source faults on
+    `heard_sources`), the truth unchanged."""
+    geometry = GEOMETRIES[mission.geometry]
+    first = min(f.truth["time"].iloc[0] for f in mission.floats)
+    last = max(f.truth["time"].iloc[-1] for f in mission.floats)
+    setting = SourceSetting(geometry.slot_s, geometry.window_s, (np.datetime64(first, "ns"), np.datetime64(last, "ns")))
+    candidates = heard_sources(mission, len(set(cfg.faults) & set(SOURCE_KINDS)))
+    infos = [f.info for f in mission.floats]
+    faults = draw_faults(cfg.faults, mission.beacons, infos, candidates, setting, rng, cfg.fault_float_share)
+    return dataclasses.replace(mission, faults=tuple(faults))
+
+
+def written_tables(mission: StressMission) -> tuple[BeaconTable, list[FloatInfo]]:
+    """beacons.csv's and floats.csv's contents as written: the correct tables with the faults."""
+    return apply_faults(mission.beacons, [f.info for f in mission.floats], mission.faults or ())
+
+
 def simulate_stress(
     geometry: str, n_floats: int, rng: np.random.Generator, cfg: StressConfig = StressConfig(), prefix: str = "s"
 ) -> StressMission:
-    """`n_floats` floats of one geometry."""
+    """`n_floats` floats of one geometry, with the faults `cfg.faults` (`with_faults`, from
+    `substream(rng, FAULT_STREAM)`)."""
     geo = GEOMETRIES[geometry]
     beacons = catalogue(geo)
-    floats = [simulate_float(f"{prefix}{k + 1:02d}", beacons, geo, cfg, rng) for k in range(n_floats)]
-    return StressMission(geometry, beacons, floats)
+    side = substream(rng, CLOCK_STREAM)
+    floats = [simulate_float(f"{prefix}{k + 1:02d}", beacons, geo, cfg, rng, side) for k in range(n_floats)]
+    mission = StressMission(geometry, beacons, floats)
+    return with_faults(mission, cfg, substream(rng, FAULT_STREAM)) if cfg.faults else mission
 
 
 def write_stress_mission(mission: StressMission, outdir: Path) -> None:
-    """A mission directory: beacons.csv, floats.csv, the arrival files (true labels in
-    beacon_id), truth/<float_id>.csv and truth/<float_id>.json. No rafostrack.toml: the
-    tracker runs with its defaults, knowing only what a user would know."""
-    from .mission_writer import write_mission_files
+    """A mission directory: beacons.csv, floats.csv (as written: with the faults), the
+    arrival files (true labels in beacon_id), truth/<float_id>.csv, truth/<float_id>.json and,
+    when faults were asked for, truth/faults.json. No rafostrack.toml: the tracker runs with
+    its defaults, knowing only what a user would know."""
+    from .mission_writer import write_faults, write_mission_files
 
-    write_mission_files(mission.beacons, [(f.info, f.record, f.truth) for f in mission.floats], Path(outdir))
+    beacons, infos = written_tables(mission)
+    floats = [(info, f.record, f.truth) for info, f in zip(infos, mission.floats, strict=True)]
+    write_mission_files(beacons, floats, Path(outdir))
     for f in mission.floats:
         write_text_atomic(Path(outdir) / "truth" / f"{f.info.float_id}.json", json.dumps(f.events, indent=2) + "\n")
+    if mission.faults is not None:
+        write_faults(mission.faults, Path(outdir))
 
 
 def with_knobs(cfg: StressConfig, settings: dict[str, Any]) -> StressConfig:

@@ -36,11 +36,14 @@ class Geometry:
     jet_lat: float  # mean latitude of the jet's core
     jet_speed_km_per_day: float  # core speed (eastward positive)
     sound_speed_m_s: float  # the truth's effective sound speed
+    slot_s: float  # the spacing of the transmission schedule's slots (rafostrack/data tables)
 
 
 GEOMETRIES = {
-    "dimes": Geometry("dimes", "2010-03-01", 3600.0, 4200.0, -57.5, 7.0, 1488.0),
-    "weddell": Geometry("weddell", "2008-04-01", 1500.0, 5000.0, -65.5, -4.0, 1471.0),
+    # DIMES sources transmit at 01:05, 01:15, ..., 01:45 (every 600 s; US1-6 at 01:06), the
+    # Weddell sources at 00:30, 00:35, 00:40, ..., 02:10 (every 300 s; W8a at 00:42).
+    "dimes": Geometry("dimes", "2010-03-01", 3600.0, 4200.0, -57.5, 7.0, 1488.0, 600.0),
+    "weddell": Geometry("weddell", "2008-04-01", 1500.0, 5000.0, -65.5, -4.0, 1471.0, 300.0),
 }
 
 

@@ -1,0 +1,328 @@
+"""The metadata findings of a batch: which table values the arrivals contradict, per mission.
+
+Each tracked float's `run.json` holds `metadata_checks`: one entry per value the tracker
+took from `floats.csv` / `beacons.csv` and checked against the arrivals (file, line, id,
+field, given, supported, sd, unit, outcome, used). A batch reads those of every float whose
+outputs are current (processed in this run, or skipped as unchanged) and gathers them per
+mission into one finding per value (file, id, field) contradicted on at least one float:
+
+- a `beacons.csv` value (a source's offset, drift, position, active period) is heard by
+  every float near the source, so a wrong one shows on each of them: it is one finding for
+  the source, counting the floats that contradict it (k) and those that checked it (n, any
+  outcome); k < n/2 is weak evidence and shows as such ("on 1 of 9 floats");
+- a `floats.csv` value belongs to one float: one finding per float.
+
+The supported value of a finding is the median, over the floats that contradict it, of the
+value each one's arrivals support (times: the median instant). A `run.json` without the key
+(written by an older version) holds no checks.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import statistics
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path, PurePath
+from typing import Any
+
+from .plan import FAILED, SKIPPED, FloatOutcome
+
+FINDINGS_NAME = "metadata-findings.csv"
+FINDINGS_COLUMNS = (
+    "mission",
+    "file",
+    "line",
+    "id",
+    "field",
+    "unit",
+    "given",
+    "supported_median",
+    "given_lat",
+    "given_lon",
+    "supported_lat",
+    "supported_lon",
+    "n_contradicted",
+    "n_checked",
+    "n_consistent",
+    "contradicting_floats",
+)
+CONTRADICTED = "contradicted"
+_SHOWN_FLOATS = 5  # float ids printed per finding (all of them are in the CSV)
+_DIGITS = {"s": 1, "km": 1, "s/day": 4, "deg": 4}
+
+Value = float | str | None
+LatLon = tuple[float, float] | None
+
+
+@dataclass(frozen=True)
+class Check:
+    """One entry of one float's `metadata_checks`."""
+
+    float_id: str  # the float whose run.json holds it
+    file: str  # the path as the run was given it
+    line: int | None
+    id: str  # float_id (floats.csv) or beacon_id (beacons.csv)
+    field: str
+    unit: str
+    given: Value
+    supported: Value
+    outcome: str
+    given_lat_lon: LatLon = None  # a fix or a source position: given is 0, supported the distance (km)
+    supported_lat_lon: LatLon = None
+
+    @property
+    def key(self) -> tuple[str, str, str]:
+        """What names the table value across floats: file name, id, field (the file's
+        directory may differ between floats tracked in different runs)."""
+        return (PurePath(self.file).name, self.id, self.field)
+
+    @property
+    def of_source(self) -> bool:
+        """A beacons.csv value (shared by the floats that hear the source), not the float's own."""
+        name = PurePath(self.file).name
+        if name in ("beacons.csv", "floats.csv"):
+            return name == "beacons.csv"
+        return self.id != self.float_id
+
+
+@dataclass(frozen=True)
+class Finding:
+    """A table value contradicted by the arrivals of at least one float of a mission."""
+
+    mission: str
+    file: str
+    line: int | None
+    id: str
+    field: str
+    unit: str
+    given: Value
+    supported: Value  # median over the floats that contradict it
+    contradicting: tuple[str, ...]  # their float ids, sorted
+    n_checked: int  # floats with an entry for it (any outcome)
+    n_consistent: int
+    of_source: bool
+    given_lat_lon: LatLon = None  # positions (fixes, sources): the table's
+    supported_lat_lon: LatLon = None  # and the median latitude and longitude the arrivals support
+
+    def row(self) -> dict[str, Any]:
+        """One row of metadata-findings.csv."""
+        return dict(
+            mission=self.mission,
+            file=self.file,
+            line="" if self.line is None else self.line,
+            id=self.id,
+            field=self.field,
+            unit=self.unit,
+            given="" if self.given is None else self.given,
+            supported_median="" if self.supported is None else self.supported,
+            given_lat="" if self.given_lat_lon is None else self.given_lat_lon[0],
+            given_lon="" if self.given_lat_lon is None else self.given_lat_lon[1],
+            supported_lat="" if self.supported_lat_lon is None else self.supported_lat_lon[0],
+            supported_lon="" if self.supported_lat_lon is None else self.supported_lat_lon[1],
+            n_contradicted=len(self.contradicting),
+            n_checked=self.n_checked,
+            n_consistent=self.n_consistent,
+            contradicting_floats=";".join(self.contradicting),
+        )
+
+    def message(self) -> str:
+        """The line printed at the end of the batch, e.g. `mission dimes: beacons.csv line 5:
+        field 'offset_s' of source B3: given 120.0 s; the arrivals support 90.2 s on 7 of 9
+        floats that hear it (float701, float702, ...)`."""
+        where = PurePath(self.file).name + (f" line {self.line}" if self.line is not None else "")
+        what = f"field '{self.field}' of {'source ' if self.of_source else ''}{self.id}"
+        given, supported = format_value(self.given, self.unit), format_value(self.supported, self.unit)
+        if self.given_lat_lon is not None and self.supported_lat_lon is not None:
+            (lat, lon), (lat_d, lon_d) = self.given_lat_lon, self.supported_lat_lon
+            given, supported = f"{lat:.3f}, {lon:.3f}", f"{lat_d:.3f}, {lon_d:.3f} ({supported} away)"
+        text = f"mission {self.mission}: {where}: {what}: given {given}; the arrivals support {supported}"
+        if not self.of_source:
+            return text
+        shown = ", ".join(self.contradicting[:_SHOWN_FLOATS])
+        more = ", ..." if len(self.contradicting) > _SHOWN_FLOATS else ""
+        return f"{text} on {len(self.contradicting)} of {self.n_checked} floats that hear it ({shown}{more})"
+
+
+def format_value(value: Value, unit: str) -> str:
+    """A value with its unit for a message: `120.0 s`, `0.0350 s/day`; times as written."""
+    if value is None:
+        return "unknown"
+    if isinstance(value, str):
+        return value
+    digits = _DIGITS.get(unit)
+    number = f"{value:.{digits}f}" if digits is not None else f"{value:.6g}"
+    return f"{number} {unit}" if unit and unit != "time" else number
+
+
+def parse_checks(run: Mapping[str, Any], float_id: str) -> list[Check]:
+    """The `metadata_checks` of one run.json payload (none when the key is missing); entries
+    that lack a file, id or field are left out. `float_id` is used when the run names none."""
+    entries = run.get("metadata_checks")
+    if not isinstance(entries, list):
+        return []
+    own = str(run.get("float_id") or float_id)
+    checks = []
+    for entry in entries:
+        if not isinstance(entry, Mapping) or not all(entry.get(k) not in (None, "") for k in ("file", "id", "field")):
+            continue
+        line = entry.get("line")
+        checks.append(
+            Check(
+                float_id=own,
+                file=str(entry["file"]),
+                line=line if isinstance(line, int) and not isinstance(line, bool) else None,
+                id=str(entry["id"]),
+                field=str(entry["field"]),
+                unit=str(entry.get("unit") or ""),
+                given=_value(entry.get("given")),
+                supported=_value(entry.get("supported")),
+                outcome=str(entry.get("outcome") or "missing"),
+                given_lat_lon=_lat_lon(entry.get("given_lat_lon")),
+                supported_lat_lon=_lat_lon(entry.get("supported_lat_lon")),
+            )
+        )
+    return checks
+
+
+def _value(value: Any) -> Value:
+    if isinstance(value, bool) or value is None:
+        return None
+    if isinstance(value, int | float):
+        return float(value)
+    return str(value)
+
+
+def _lat_lon(value: Any) -> LatLon:
+    if not isinstance(value, list | tuple) or len(value) != 2:
+        return None
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+        return None
+    return (float(value[0]), float(value[1]))
+
+
+def mission_findings(mission: str, checks: Iterable[Check]) -> list[Finding]:
+    """One finding per (file name, id, field) contradicted on at least one float, sorted by
+    file, line, id and field. Per value: k = floats whose entry is contradicted, n = floats
+    with an entry (any outcome but "missing"), supported = median over the k floats."""
+    per_float: dict[tuple[str, str, str], dict[str, Check]] = {}
+    for check in checks:
+        if check.outcome == "missing":
+            continue
+        seen = per_float.setdefault(check.key, {})
+        if check.float_id not in seen or check.outcome == CONTRADICTED:  # a float counts once
+            seen[check.float_id] = check
+    findings = [
+        _finding(mission, by_float)
+        for by_float in per_float.values()
+        if any(c.outcome == CONTRADICTED for c in by_float.values())
+    ]
+    return sorted(findings, key=lambda f: (PurePath(f.file).name, f.line is None, f.line or 0, f.id, f.field))
+
+
+def _finding(mission: str, by_float: Mapping[str, Check]) -> Finding:
+    """The finding of one table value from each float's check of it."""
+    against = [by_float[f] for f in sorted(by_float) if by_float[f].outcome == CONTRADICTED]
+    first = against[0]
+    return Finding(
+        mission=mission,
+        file=first.file,
+        line=first.line,
+        id=first.id,
+        field=first.field,
+        unit=first.unit,
+        given=first.given,
+        supported=median_value([c.supported for c in against]),
+        contradicting=tuple(c.float_id for c in against),
+        n_checked=len(by_float),
+        n_consistent=sum(c.outcome == "consistent" for c in by_float.values()),
+        of_source=first.of_source,
+        given_lat_lon=first.given_lat_lon,
+        supported_lat_lon=_median_lat_lon([c.supported_lat_lon for c in against]),
+    )
+
+
+def _median_lat_lon(positions: Sequence[LatLon]) -> LatLon:
+    """The median latitude and the median longitude (a source's position seen from several floats)."""
+    known = [p for p in positions if p is not None]
+    if not known:
+        return None
+    return (float(statistics.median(p[0] for p in known)), float(statistics.median(p[1] for p in known)))
+
+
+def median_value(values: Sequence[Value]) -> Value:
+    """The median of numbers, or of ISO times (an odd count gives the middle time as written);
+    None when there is none. Numbers and times mixed: the numbers."""
+    numbers = [v for v in values if isinstance(v, float)]
+    if numbers:
+        return float(statistics.median(numbers))
+    times = sorted((when, v) for v in values if isinstance(v, str) and (when := _instant(v)) is not None)
+    if not times:
+        return next((v for v in values if v is not None), None)
+    middle = len(times) // 2
+    if len(times) % 2:
+        return times[middle][1]
+    early, late = times[middle - 1][0], times[middle][0]
+    return _iso(early + (late - early) / 2)
+
+
+def _instant(text: str) -> datetime | None:
+    """An ISO time (naive ones taken as UTC), or None when the text is not one."""
+    try:
+        when = datetime.fromisoformat(text)
+    except ValueError:
+        return None
+    return when if when.tzinfo is not None else when.replace(tzinfo=UTC)
+
+
+def _iso(when: datetime) -> str:
+    text = when.isoformat(timespec="seconds")
+    return text[:-6] + "Z" if text.endswith("+00:00") else text
+
+
+def read_run_checks(run_json: Path, float_id: str) -> list[Check] | None:
+    """The metadata checks of one float's run.json; None when the file cannot be read."""
+    try:
+        run = json.loads(Path(run_json).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return parse_checks(run, float_id) if isinstance(run, dict) else None
+
+
+def batch_findings(outcomes: Sequence[FloatOutcome]) -> tuple[list[Finding], list[str]]:
+    """The findings of every mission, from the run.json of each float whose outputs are
+    current (processed now or skipped as unchanged; a failed float's old outputs are not),
+    and a line for each run.json that could not be read."""
+    checks: dict[str, list[Check]] = {}
+    unreadable = []
+    for outcome in outcomes:
+        if not _is_current(outcome):
+            continue
+        path = Path(outcome.output) / "run.json"
+        read = read_run_checks(path, outcome.float_id)
+        if read is None:
+            unreadable.append(f"{path}: cannot be read; its metadata checks are left out of {FINDINGS_NAME}")
+            continue
+        checks.setdefault(outcome.mission, []).extend(read)
+    findings = [f for mission in sorted(checks) for f in mission_findings(mission, checks[mission])]
+    return findings, unreadable
+
+
+def _is_current(outcome: FloatOutcome) -> bool:
+    """Whether the float's output directory holds outputs of its current inputs."""
+    if outcome.status == FAILED or not outcome.output:
+        return False
+    return outcome.status != SKIPPED or outcome.reason == "unchanged"
+
+
+def findings_csv(findings: Sequence[Finding]) -> str:
+    """The text of metadata-findings.csv: a header (`FINDINGS_COLUMNS`) and one row per finding."""
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=FINDINGS_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for finding in findings:
+        writer.writerow(finding.row())
+    return buf.getvalue()

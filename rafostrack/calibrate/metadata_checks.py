@@ -1,0 +1,319 @@
+"""The table values weighed against the arrivals: is each value in floats.csv and beacons.csv
+that calibration uses what the arrivals support?
+
+The timing fit (`calibrate.kalman`) treats each table value as a measurement: the launch and
+end fixes (position offsets x ~ N(0, sd^2 I) at the first and last nodes), the float clock's
+offsets (the clock residual c ~ N(0, `[fixes] clock_offset_sd_s`^2) at launch and at the
+end), each heard source's offset and drift corrections (a_i, d_i ~ N(0, diag(p_a^2,
+p_d^2))). Its posterior of such a value's correction x, N(m, C), holds the prior N(0, P) and
+the arrivals; the arrivals' own estimate follows by taking the prior out, exactly for the
+linearised Gaussian model (the prior enters only x's block of the information matrix, so of
+x's marginal information too):
+
+    C_d^-1 = C^-1 - P^-1,    m_d = C_d C^-1 m.
+
+A value is *contradicted* when the arrivals' correction lies farther from zero than
+`[checks] z_score` of its standard deviations, z sqrt(C_d) (the arrivals are sure the value
+is not the table's), and than the value's tolerance (the difference matters; the prior's own
+width, which lets calibration refine a value, is not an error); *undetermined* when the
+arrivals' sd exceeds the tolerance (or C_d^-1 is not positive: the arrivals alone do not fix
+it); *consistent* otherwise. A value the table does not give (an empty clock_offset_end_s)
+is *estimated*, or undetermined when its sd exceeds the tolerance (then with a warning: the
+track rests on a value the data cannot check). What calibration does with a contradicted
+value (tracks with the arrivals' value) is `calibrate.release`'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..config import ChecksConfig
+from ..domain import BeaconTable, FloatInfo
+from ..model.geodesy import displace
+from . import kalman
+from .kalman_evidence import solved
+from .kalman_problem import CLOCK, NODE
+
+CONSISTENT, CONTRADICTED, UNDETERMINED, ESTIMATED = "consistent", "contradicted", "undetermined", "estimated"
+
+
+@dataclass(frozen=True)
+class MetadataCheck:
+    """One table value against the arrivals (run.json `metadata_checks`, one entry each)."""
+
+    file: str
+    line: int | None
+    id: str
+    field: str
+    given: float | None  # None: not in the table
+    supported: float | None  # the arrivals' value; None: they cannot tell
+    sd: float | None
+    unit: str
+    outcome: str
+    used: float | None = None  # the value the track used (set once calibration has decided)
+    # For the fixes: the positions, given and supported (lat, lon); given and supported
+    # above are then 0 and the distance between them (km).
+    given_lat_lon: tuple[float, float] | None = None
+    supported_lat_lon: tuple[float, float] | None = None
+
+    def as_json(self) -> dict[str, Any]:
+        return {k: v for k, v in asdict(self).items() if v is not None or k in ("given", "supported", "sd", "line")}
+
+    def warning(self) -> str | None:
+        """The one-line warning of a contradicted value or of one the table leaves empty (None
+        otherwise)."""
+        where = f"{self.file}: line {self.line}" if self.line is not None else self.file
+        if self.given is None and self.outcome in (UNDETERMINED, ESTIMATED):
+            told = "the arrivals cannot tell it" if self.outcome == UNDETERMINED else "estimated from the arrivals"
+            return (
+                f"{where}: field '{self.field}' of {self.id} is empty; {told}: "
+                f"{_number(self.supported)} {self.unit} (sd {_number(self.sd)} {self.unit})"
+            )
+        if self.outcome != CONTRADICTED:
+            return None
+        if self.given_lat_lon is not None and self.supported_lat_lon is not None:
+            given = "{:.3f}, {:.3f}".format(*self.given_lat_lon)
+            lat, lon = self.supported_lat_lon
+            supported = f"{lat:.3f}, {lon:.3f} ({_number(self.supported)} km away, sd {_number(self.sd)} km)"
+        else:
+            given = f"{_number(self.given)} {self.unit}"
+            supported = f"{_number(self.supported)} {self.unit} (sd {_number(self.sd)} {self.unit})"
+        return (
+            f"{where}: field '{self.field}' of {self.id}: given {given}; the arrivals support {supported}; "
+            "tracked with the arrivals' value"
+        )
+
+
+def warnings_of(checks: tuple[MetadataCheck, ...] | list[MetadataCheck]) -> list[str]:
+    """The warnings of `checks`, one line each."""
+    return [w for w in (c.warning() for c in checks) if w is not None]
+
+
+def _number(value: float | None) -> str:
+    return "?" if value is None else f"{value:.4g}"
+
+
+def data_only(mean: NDArray, cov: NDArray, prior_sd: NDArray) -> tuple[NDArray, NDArray] | None:
+    """The arrivals' estimate of a correction x whose posterior N(mean, cov) holds the prior
+    N(0, diag(prior_sd^2)): C_d^-1 = C^-1 - P^-1, m_d = C_d C^-1 m (module docstring); None
+    when C_d^-1 is not positive definite (the arrivals alone do not determine x)."""
+    info = np.linalg.inv(cov)
+    info_d = info - np.diag(1.0 / np.asarray(prior_sd, dtype=float) ** 2)
+    info_d = 0.5 * (info_d + info_d.T)
+    if np.linalg.eigvalsh(info_d).min() <= 1e-12 * max(1.0, float(np.abs(info).max())):
+        return None
+    cov_d = np.linalg.inv(info_d)
+    return cov_d @ info @ mean, cov_d
+
+
+def outcome_of(correction: float, sd_d: float, tolerance: float, z: float) -> str:
+    """Contradicted, undetermined or consistent (module docstring)."""
+    if abs(correction) > max(z * sd_d, tolerance):
+        return CONTRADICTED
+    return UNDETERMINED if sd_d > tolerance else CONSISTENT
+
+
+@dataclass(frozen=True)
+class _Posterior:
+    """The timing fit's posterior over chosen unknowns: mean and covariance by index."""
+
+    mean: NDArray[np.float64]  # (n_unknowns,)
+    columns: NDArray[np.intp]
+    cov_columns: NDArray[np.float64]  # (n_unknowns, len(columns)): N^-1 [:, columns]
+
+    @classmethod
+    def of(
+        cls, problem: kalman.Problem, fit: kalman.KalmanFit, priors: kalman.KalmanPriors, columns: NDArray
+    ) -> _Posterior:
+        lin = kalman.linearise(problem, fit.unknowns, fit.weight, priors)
+        _, factor, step = solved(lin, fit.hyper)
+        rhs = np.zeros((problem.n_unknowns, len(columns)))
+        rhs[columns, np.arange(len(columns))] = 1.0
+        return cls(fit.unknowns + step, np.asarray(columns), factor.solve(rhs))
+
+    def block(self, idx: list[int] | NDArray) -> tuple[NDArray, NDArray]:
+        at = [int(np.flatnonzero(self.columns == i)[0]) for i in idx]
+        return self.mean[list(idx)], self.cov_columns[np.ix_(list(idx), at)]
+
+
+def _float_source(info: FloatInfo) -> tuple[str, int | None]:
+    return info.source if info.source is not None else ("floats.csv", None)
+
+
+def timing_checks(
+    problem: kalman.Problem,
+    fit: kalman.KalmanFit,
+    priors: kalman.KalmanPriors,
+    heard: NDArray[np.intp],
+    mid_days: NDArray[np.float64],
+    beacons: BeaconTable,
+    info: FloatInfo,
+    checks: ChecksConfig,
+) -> list[MetadataCheck]:
+    """Every table value in the timing fit against the arrivals: the fixes, the float clock's
+    offsets, each heard source's offset and drift (module docstring)."""
+    last = problem.n_nodes - 1
+    columns = [0, 1, CLOCK, NODE * last, NODE * last + 1, NODE * last + CLOCK]
+    columns += [*problem.per_beacon(0), *problem.per_beacon(1)]
+    post = _Posterior.of(problem, fit, priors, np.array(sorted(set(columns))))
+    found = _fix_checks(problem, post, info, checks) + _clock_checks(problem, post, info, checks)
+    return found + _source_checks(problem, post, priors, heard, mid_days, beacons, checks)
+
+
+def end_alternatives(found: list[MetadataCheck]) -> list[list[MetadataCheck]]:
+    """The readings of `found` to choose between by the timing fit's evidence: where both the
+    end fix and the end clock offset are contradicted, each was checked with the other held,
+    and a wrong clock at the end shifts every arrival alike, which a moved position takes up
+    in part (and the reverse): one may be the other's echo. Two readings then, each with one
+    of them undetermined; else `found` alone."""
+    fix = next((c for c in found if c.field == "end_fix"), None)
+    clock = next((c for c in found if c.field == "clock_offset_end_s"), None)
+    if fix is None or clock is None or not fix.outcome == clock.outcome == CONTRADICTED:
+        return [found]
+    return [[dataclasses.replace(c, outcome=UNDETERMINED) if c is echo else c for c in found] for echo in (fix, clock)]
+
+
+def _clock_index(problem: kalman.Problem) -> list[int]:
+    """The clock residual's unknowns at launch and at the last node."""
+    return [CLOCK, NODE * (problem.n_nodes - 1) + CLOCK]
+
+
+def _clock_sd(problem: kalman.Problem) -> list[float]:
+    """Their priors' sds (infinite: no prior, at an end the table leaves out or without an
+    end fix)."""
+    start_sd, end_sd = problem.clock_sd_s
+    return [start_sd, np.inf if end_sd is None or problem.end_sd_km is None else end_sd]
+
+
+def _fix_checks(
+    problem: kalman.Problem, post: _Posterior, info: FloatInfo, checks: ChecksConfig
+) -> list[MetadataCheck]:
+    """The launch fix (first node) and, when used, the end fix (last node)."""
+    file, line = _float_source(info)
+    launch, end = [0, 1], [NODE * (problem.n_nodes - 1), NODE * (problem.n_nodes - 1) + 1]
+    fixes = [("launch_fix", 0, launch, [problem.launch_sd_km] * 2)]
+    if problem.end_sd_km is not None:
+        fixes.append(("end_fix", problem.n_nodes - 1, end, [problem.end_sd_km] * 2))
+    found = []
+    for name, node, index, prior_sd in fixes:
+        arrivals = data_only(*post.block(index), np.array(prior_sd))
+        given = (float(problem.lat[node]), float(problem.lon[node]))
+        if arrivals is None:
+            found.append(MetadataCheck(file, line, info.float_id, name, 0.0, None, None, "km", UNDETERMINED,
+                                       given_lat_lon=given))  # fmt: skip
+            continue
+        shift, cov_d = arrivals[0][:2], arrivals[1][:2, :2]
+        distance = float(np.hypot(*shift))
+        direction = shift / distance if distance > 0 else np.array([1.0, 0.0])
+        sd_d = float(np.sqrt(direction @ cov_d @ direction))
+        lat, lon = displace(np.array(given[0]), np.array(given[1]), shift[0], shift[1])
+        outcome = outcome_of(distance, sd_d, checks.fix_tolerance_km, checks.z_score)
+        found.append(MetadataCheck(file, line, info.float_id, name, 0.0, round(distance, 2), round(sd_d, 2), "km",
+                                   outcome, given_lat_lon=given,
+                                   supported_lat_lon=(round(float(lat), 4), round(float(lon), 4))))  # fmt: skip
+    return found
+
+
+def _clock_checks(
+    problem: kalman.Problem, post: _Posterior, info: FloatInfo, checks: ChecksConfig
+) -> list[MetadataCheck]:
+    """The clock's offsets at launch and at the end fix. The arrivals fix the clock's drift
+    between them well and its level only as well as the sources' offsets allow, so the launch
+    offset is checked through the level (both offsets' priors taken out), the end offset
+    through the drift since launch (the launch offset taken as right unless its own check
+    contradicts it); an end offset the table leaves out is estimated."""
+    file, line = _float_source(info)
+    start_sd, end_sd = problem.clock_sd_s
+    last = NODE * (problem.n_nodes - 1) + CLOCK
+    if problem.end_sd_km is None or end_sd is None:
+        start = _clock_level_check(post, [CLOCK], [start_sd], info, checks)
+        if problem.end_sd_km is None:
+            return [start]
+        return [start, _estimated_end_clock(post, last, info, checks)]
+    arrivals = data_only(*post.block([CLOCK, last]), np.array([start_sd, end_sd]))
+    start = _clock_level_check(post, [CLOCK, last], [start_sd, end_sd], info, checks)
+    if arrivals is None:
+        end_check = MetadataCheck(file, line, info.float_id, "clock_offset_end_s", info.clock_offset_end_s, None, None,
+                                  "s", UNDETERMINED)  # fmt: skip
+        return [start, end_check]
+    mean, cov = arrivals[0][:2], arrivals[1][:2, :2]
+    weights = np.array([0.0, 1.0]) if start.outcome == CONTRADICTED else np.array([-1.0, 1.0])
+    correction, sd_d = float(weights @ mean), float(np.sqrt(weights @ cov @ weights))
+    outcome = outcome_of(correction, sd_d, checks.clock_tolerance_s, checks.z_score)
+    end = info.clock_offset_end_s
+    return [start, MetadataCheck(file, line, info.float_id, "clock_offset_end_s", end, round(end + correction, 3),
+                                 round(sd_d, 3), "s", outcome)]  # fmt: skip
+
+
+def _clock_level_check(
+    post: _Posterior, index: list[int], prior_sd: list[float], info: FloatInfo, checks: ChecksConfig
+) -> MetadataCheck:
+    """The launch offset against the arrivals, the clock priors at `index` taken out."""
+    file, line = _float_source(info)
+    given = info.clock_offset_start_s
+    arrivals = data_only(*post.block(index), np.array(prior_sd))
+    if arrivals is None:
+        return MetadataCheck(file, line, info.float_id, "clock_offset_start_s", given, None, None, "s", UNDETERMINED)
+    correction, sd_d = float(arrivals[0][0]), float(np.sqrt(arrivals[1][0, 0]))
+    outcome = outcome_of(correction, sd_d, checks.clock_tolerance_s, checks.z_score)
+    return MetadataCheck(file, line, info.float_id, "clock_offset_start_s", given, round(given + correction, 3),
+                         round(sd_d, 3), "s", outcome)  # fmt: skip
+
+
+def _estimated_end_clock(post: _Posterior, index: int, info: FloatInfo, checks: ChecksConfig) -> MetadataCheck:
+    """The end offset that the table leaves out: the start offset plus the clock residual at
+    the end fix; undetermined where its sd exceeds the tolerance."""
+    file, line = _float_source(info)
+    mean, cov = post.block([index])
+    sd = float(np.sqrt(cov[0, 0]))
+    outcome = ESTIMATED if sd <= checks.clock_tolerance_s else UNDETERMINED
+    supported = round(info.clock_offset_start_s + float(mean[0]), 3)
+    return MetadataCheck(file, line, info.float_id, "clock_offset_end_s", None, supported, round(sd, 3), "s", outcome)
+
+
+def _source_checks(
+    problem: kalman.Problem,
+    post: _Posterior,
+    priors: kalman.KalmanPriors,
+    heard: NDArray[np.intp],
+    mid_days: NDArray[np.float64],
+    beacons: BeaconTable,
+    checks: ChecksConfig,
+) -> list[MetadataCheck]:
+    """Each heard source's offset (at its epoch: a_i - d_i mid_i) and drift, from the
+    arrivals' joint estimate of (a_i, d_i) and the clock offsets."""
+    released = np.zeros(problem.n_heard, bool) if problem.released is None else problem.released
+    found = []
+    for h, row in enumerate(heard):
+        p_a = priors.released_offset_s if released[h] else priors.offset_s
+        p_d = priors.released_drift_s_per_day if released[h] else priors.drift_s_per_day
+        # The clock's priors out too: a wrong clock offset moves every source's arrivals alike,
+        # which is the clock's to explain, not each source's.
+        index = [problem.per_beacon(0)[h], problem.per_beacon(1)[h], *_clock_index(problem)]
+        joint = data_only(*post.block(index), np.array([p_a, p_d, *_clock_sd(problem)]))
+        arrivals = None if joint is None else (joint[0][:2], joint[1][:2, :2])
+        file = beacons.source_file or "beacons.csv"
+        line = None if beacons.source_line is None else int(beacons.source_line[row])
+        name = str(beacons.beacon_id[row])
+        at_epoch = np.array([1.0, -mid_days[h]])  # offset at the epoch = a - d mid
+        values = (
+            ("offset_s", float(beacons.offset_s[row]), at_epoch, checks.offset_tolerance_s, "s"),
+            ("drift_s_per_day", float(beacons.drift_s_per_day[row]), np.array([0.0, 1.0]),
+             checks.drift_tolerance_s_per_day, "s/day"),
+        )  # fmt: skip
+        for field, given, weights, tolerance, unit in values:
+            if arrivals is None:
+                found.append(MetadataCheck(file, line, name, field, given, None, None, unit, UNDETERMINED))
+                continue
+            correction = float(weights @ arrivals[0])
+            sd_d = float(np.sqrt(weights @ arrivals[1] @ weights))
+            outcome = outcome_of(correction, sd_d, tolerance, checks.z_score)
+            digits = 3 if unit == "s" else 5
+            found.append(MetadataCheck(file, line, name, field, given, round(given + correction, digits),
+                                       round(sd_d, digits), unit, outcome))  # fmt: skip
+    return found

@@ -1,0 +1,351 @@
+"""The batch's metadata findings: the `metadata_checks` of every float's run.json gathered per
+mission into one finding per contradicted table value (one per source for beacons.csv, one
+per float for floats.csv), `metadata-findings.csv` and the lines printed at the end.
+
+Synthetic output trees (run.json files written here) for the aggregation; one tiny simulated
+mission (1 float, 6 days, 60 particles) through `rafostrack batch` end to end.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+from support import simulated_mission_dir
+
+import rafostrack.io.atomic
+from rafostrack import batch as b
+from rafostrack.batch.findings import (
+    FINDINGS_COLUMNS,
+    FINDINGS_NAME,
+    batch_findings,
+    findings_csv,
+    median_value,
+    mission_findings,
+    parse_checks,
+)
+from rafostrack.batch.report import report_findings
+from rafostrack.cli import main
+
+BEACONS = "/data/dimes/beacons.csv"
+FLOATS = "/data/dimes/floats.csv"
+
+
+def _entry(
+    file: str, line: int | None, id_: str, field: str, given: Any, supported: Any, outcome: str, unit: str = "s"
+):
+    return {
+        "file": file,
+        "line": line,
+        "id": id_,
+        "field": field,
+        "given": given,
+        "supported": supported,
+        "sd": 0.5,
+        "unit": unit,
+        "outcome": outcome,
+        "used": supported,
+    }
+
+
+def _offset(supported: float, outcome: str, file: str = BEACONS) -> dict[str, Any]:
+    """Source B3's offset_s (line 5 of beacons.csv, given 120 s) as one float checked it."""
+    return _entry(file, 5, "B3", "offset_s", 120.0, supported, outcome)
+
+
+def _clock(float_id: str, line: int, given: float, supported: float, outcome: str) -> dict[str, Any]:
+    return _entry(FLOATS, line, float_id, "clock_offset_end_s", given, supported, outcome)
+
+
+def _checks(float_id: str, *entries: dict[str, Any]):
+    return parse_checks({"float_id": float_id, "metadata_checks": list(entries)}, float_id)
+
+
+def _tree(out: Path, runs: dict[tuple[str, str], dict[str, Any] | str], status: str = b.PROCESSED) -> list:
+    """OUT/<mission>/<float>/run.json for each run (a dict, or raw text), and their outcomes."""
+    outcomes = []
+    for (mission, float_id), run in sorted(runs.items()):
+        where = out / mission / float_id
+        where.mkdir(parents=True)
+        (where / "run.json").write_text(run if isinstance(run, str) else json.dumps(run))
+        reason = "unchanged" if status == b.SKIPPED else "new"
+        outcomes.append(b.FloatOutcome(mission, float_id, status, reason, output=str(where)))
+    return outcomes
+
+
+def _run(float_id: str, *entries: dict[str, Any]) -> dict[str, Any]:
+    return {"float_id": float_id, "warnings": [], "metadata_checks": list(entries)}
+
+
+# --------------------------------------------------------------------------------------
+
+
+def test_a_source_contradicted_on_three_floats_is_one_finding():
+    """Source B3's offset is heard by four floats, three of which contradict it (one of them
+    tracked from another copy of the mission: the file's directory differs), and not by a
+    fifth: one finding, k = 3 of n = 4, the median of the three supported values."""
+    checks = [
+        *_checks("float701", _offset(90.2, "contradicted")),
+        *_checks("float702", _offset(95.0, "contradicted", file="/old/root/dimes/beacons.csv")),
+        *_checks("float703", _offset(88.0, "contradicted")),
+        *_checks("float704", _offset(119.5, "consistent")),
+        *_checks("float705", _clock("float705", 6, 1.0, 1.1, "consistent")),
+    ]
+    [finding] = mission_findings("dimes", checks)
+    assert (finding.id, finding.field, finding.line, finding.given) == ("B3", "offset_s", 5, 120.0)
+    assert finding.of_source and finding.supported == 90.2
+    assert finding.contradicting == ("float701", "float702", "float703")
+    assert (finding.n_checked, finding.n_consistent) == (4, 1)
+    assert finding.message() == (
+        "mission dimes: beacons.csv line 5: field 'offset_s' of source B3: given 120.0 s; "
+        "the arrivals support 90.2 s on 3 of 4 floats that hear it (float701, float702, float703)"
+    )
+
+
+def test_a_minority_contradiction_says_so_and_long_lists_are_cut():
+    checks = [*_checks("f0", _offset(30.0, "contradicted"))]
+    checks += [c for i in range(1, 9) for c in _checks(f"f{i}", _offset(120.0, "consistent"))]
+    [weak] = mission_findings("dimes", checks)
+    assert weak.message().endswith("the arrivals support 30.0 s on 1 of 9 floats that hear it (f0)")
+    many = [c for i in range(7) for c in _checks(f"f{i}", _offset(90.0 + i, "contradicted"))]
+    [strong] = mission_findings("dimes", many)
+    assert strong.supported == 93.0
+    assert strong.message().endswith("93.0 s on 7 of 7 floats that hear it (f0, f1, f2, f3, f4, ...)")
+    assert strong.row()["contradicting_floats"] == "f0;f1;f2;f3;f4;f5;f6"
+
+
+def test_floats_table_findings_are_one_per_float():
+    checks = [
+        *_checks("float767", _clock("float767", 4, -12.0, 11.8, "contradicted"), _offset(120.0, "consistent")),
+        *_checks("float768", _clock("float768", 5, 3.0, -3.1, "contradicted")),
+        *_checks("float769", _clock("float769", 6, 1.0, 1.2, "consistent")),
+    ]
+    findings = mission_findings("dimes", checks)
+    assert [(f.id, f.line, f.contradicting, f.n_checked, f.of_source) for f in findings] == [
+        ("float767", 4, ("float767",), 1, False),
+        ("float768", 5, ("float768",), 1, False),
+    ]
+    assert findings[0].message() == (
+        "mission dimes: floats.csv line 4: field 'clock_offset_end_s' of float767: given -12.0 s; "
+        "the arrivals support 11.8 s"
+    )
+
+
+def test_consistent_undetermined_and_missing_checks_give_no_finding(tmp_path):
+    runs: dict[tuple[str, str], dict[str, Any] | str] = {
+        ("m", "f1"): _run(
+            "f1",
+            _offset(119.0, "consistent"),
+            _entry(FLOATS, 2, "f1", "clock_offset_end_s", None, 1.5, "estimated"),
+            _entry(FLOATS, 2, "f1", "launch_fix", 0.0, None, "undetermined", unit="km"),
+        ),
+        ("m", "f2"): {"float_id": "f2", "warnings": []},  # an older run.json: no key, no checks
+        ("m", "f3"): _run("f3", {"file": BEACONS, "outcome": "contradicted"}),  # no id or field: left out
+    }
+    assert parse_checks({"float_id": "f2", "warnings": []}, "f2") == []
+    findings, unreadable = batch_findings(_tree(tmp_path, runs))
+    assert findings == [] and unreadable == []
+    assert findings_csv(findings) == ",".join(FINDINGS_COLUMNS) + "\n"
+
+
+def test_the_source_is_told_from_the_float_by_file_name_or_id():
+    """beacons.csv / floats.csv by name; a table of another name: the float's own id or not."""
+    own = _entry("/m/table.csv", 3, "f1", "window_s", 4200.0, 4300.0, "contradicted")
+    other = _entry("/m/table.csv", 4, "B2", "drift_s_per_day", 0.0, 0.035, "contradicted", unit="s/day")
+    source, mine = sorted(mission_findings("m", _checks("f1", own, other)), key=lambda f: f.id)
+    assert source.of_source and not mine.of_source
+    assert "given 0.0000 s/day; the arrivals support 0.0350 s/day on 1 of 1 floats" in source.message()
+    no_line = _entry(FLOATS, None, "f1", "window_s", 4200.0, None, "contradicted")
+    [finding] = mission_findings("m", _checks("f1", no_line))
+    assert (
+        finding.message()
+        == "mission m: floats.csv: field 'window_s' of f1: given 4200.0 s; the arrivals support unknown"
+    )
+
+
+def test_a_source_position_gives_the_median_position():
+    """A position (a fix, a source): given 0 and the distance in km, with the positions."""
+
+    def position(supported_km: float, lat: float, lon: float) -> dict[str, Any]:
+        entry = _entry(BEACONS, 3, "B1", "position", 0.0, supported_km, "contradicted", unit="km")
+        return {**entry, "given_lat_lon": [-58.0, -90.0], "supported_lat_lon": [lat, lon]}
+
+    seen = [position(30.0, -58.25, -90.1), position(33.0, -58.3, -90.2), position(29.0, -58.2, -90.0)]
+    [finding] = mission_findings("m", [c for i, e in enumerate(seen) for c in _checks(f"f{i}", e)])
+    assert (finding.given_lat_lon, finding.supported_lat_lon, finding.supported) == (
+        (-58.0, -90.0),
+        (-58.25, -90.1),
+        30.0,
+    )
+    assert finding.message() == (
+        "mission m: beacons.csv line 3: field 'position' of source B1: given -58.000, -90.000; "
+        "the arrivals support -58.250, -90.100 (30.0 km away) on 3 of 3 floats that hear it (f0, f1, f2)"
+    )
+    row = finding.row()
+    assert (row["given_lat"], row["supported_lon"], row["supported_median"]) == (-58.0, -90.1, 30.0)
+
+
+def test_the_median_of_times_is_a_time():
+    end = "2010-06-01T00:00:00Z"
+    assert median_value(["2010-03-01T00:00:00Z", "2010-01-01T00:00:00Z", "2010-02-01T00:00:00Z"]) == (
+        "2010-02-01T00:00:00Z"
+    )
+    assert median_value(["2010-01-01T00:00:00Z", "2010-01-03T00:00:00"]) == "2010-01-02T00:00:00Z"
+    assert median_value([None, 2.0, 4.0]) == 3.0 and median_value([None]) is None
+    checks = [
+        c
+        for i, t in enumerate(["2010-07-20T00:00:00Z", "2010-07-10T00:00:00Z", "2010-07-12T00:00:00Z"])
+        for c in _checks(f"f{i}", _entry(BEACONS, 7, "B1", "end", end, t, "contradicted", unit="time"))
+    ]
+    [finding] = mission_findings("m", checks)
+    assert finding.message().startswith(
+        "mission m: beacons.csv line 7: field 'end' of source B1: given 2010-06-01T00:00:00Z; "
+        "the arrivals support 2010-07-12T00:00:00Z on 3 of 3 floats"
+    )
+
+
+def test_batch_findings_read_current_outputs_per_mission(tmp_path):
+    """Floats processed now and floats skipped as unchanged count, per mission; a failed
+    float's old outputs do not; an unreadable run.json is reported, not fatal."""
+    processed = _tree(
+        tmp_path,
+        {
+            ("dimes", "f1"): _run("f1", _offset(90.0, "contradicted")),
+            ("other", "f1"): _run("f1", _offset(100.0, "contradicted")),
+            ("other", "f9"): "{truncated",
+        },
+    )
+    skipped = _tree(tmp_path, {("dimes", "f2"): _run("f2", _offset(92.0, "contradicted"))}, status=b.SKIPPED)
+    failed = _tree(tmp_path, {("dimes", "f3"): _run("f3", _offset(10.0, "contradicted"))}, status=b.FAILED)
+    not_yet = [b.FloatOutcome("dimes", "f4", b.SKIPPED, "no arrival file f4.csv (listed in floats.csv)")]
+    findings, unreadable = batch_findings([*processed, *skipped, *failed, *not_yet])
+    assert [(f.mission, f.contradicting, f.supported) for f in findings] == [
+        ("dimes", ("f1", "f2"), 91.0),
+        ("other", ("f1",), 100.0),
+    ]
+    assert len(unreadable) == 1 and "other/f9/run.json: cannot be read" in unreadable[0]
+
+
+def test_the_csv_and_the_printed_lines(tmp_path):
+    outcomes = _tree(
+        tmp_path,
+        {
+            ("dimes", "float767"): _run(
+                "float767", _clock("float767", 4, -12.0, 11.8, "contradicted"), _offset(90.0, "contradicted")
+            ),
+            ("dimes", "float768"): _run("float768", _offset(91.0, "undetermined")),
+        },
+    )
+    stream = io.StringIO()
+    reporter = b.Reporter(stream, tty=False)
+    text = report_findings(reporter, outcomes, tmp_path)
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert tuple(rows[0]) == FINDINGS_COLUMNS
+    assert rows == [
+        {
+            "mission": "dimes",
+            "file": BEACONS,
+            "line": "5",
+            "id": "B3",
+            "field": "offset_s",
+            "unit": "s",
+            "given": "120.0",
+            "supported_median": "90.0",
+            "given_lat": "",
+            "given_lon": "",
+            "supported_lat": "",
+            "supported_lon": "",
+            "n_contradicted": "1",
+            "n_checked": "2",
+            "n_consistent": "0",
+            "contradicting_floats": "float767",
+        },
+        {
+            "mission": "dimes",
+            "file": FLOATS,
+            "line": "4",
+            "id": "float767",
+            "field": "clock_offset_end_s",
+            "unit": "s",
+            "given": "-12.0",
+            "supported_median": "11.8",
+            "given_lat": "",
+            "given_lon": "",
+            "supported_lat": "",
+            "supported_lon": "",
+            "n_contradicted": "1",
+            "n_checked": "1",
+            "n_consistent": "0",
+            "contradicting_floats": "float767",
+        },
+    ]
+    assert stream.getvalue().splitlines() == [
+        "rafostrack batch: metadata findings: 2 table value(s) contradicted by the arrivals "
+        f"({tmp_path / FINDINGS_NAME}):",
+        "rafostrack batch: mission dimes: beacons.csv line 5: field 'offset_s' of source B3: given 120.0 s; "
+        "the arrivals support 90.0 s on 1 of 2 floats that hear it (float767)",
+        "rafostrack batch: mission dimes: floats.csv line 4: field 'clock_offset_end_s' of float767: "
+        "given -12.0 s; the arrivals support 11.8 s",
+    ]
+    assert len(reporter.lines) == 3  # and batch.log gets them
+
+
+# --------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def archive(tmp_path_factory) -> Path:
+    """A tiny simulated mission `dimes` (one float, sim1, 6 days, 60 particles)."""
+    root = tmp_path_factory.mktemp("findings") / "archive"
+    simulated_mission_dir(root / "dimes", seed=5, days=6, particles=60)
+    return root
+
+
+def _batch(root: Path, out: Path):
+    return CliRunner().invoke(main, ["batch", str(root), "--out", str(out), "--no-plots", "--jobs", "1"])
+
+
+def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive, tmp_path, monkeypatch):
+    """A clean mission gives a header-only metadata-findings.csv, written atomically; a float
+    skipped as unchanged is read from disk (its run.json edited here, the manifest's size with it)."""
+    written: list[Path] = []
+    original = rafostrack.io.atomic.write_text_atomic
+
+    def spy(path, text):
+        written.append(Path(path))
+        original(path, text)
+
+    monkeypatch.setattr(rafostrack.io.atomic, "write_text_atomic", spy)
+    out = tmp_path / "out"
+    result = _batch(archive, out)
+    assert result.exit_code == 0, result.output
+    assert out / FINDINGS_NAME in written
+    assert (out / FINDINGS_NAME).read_text() == ",".join(FINDINGS_COLUMNS) + "\n"
+    assert not list(out.glob(".*.tmp"))
+    assert "metadata findings: no table value contradicted" in (out / "batch.log").read_text()
+
+    float_dir = out / "dimes" / "sim1"
+    run = json.loads((float_dir / "run.json").read_text())
+    run["metadata_checks"] = [
+        _entry(str(archive / "dimes" / "beacons.csv"), 3, "B1", "offset_s", 0.0, 30.5, "contradicted")
+    ]
+    (float_dir / "run.json").write_text(json.dumps(run))
+    manifest = json.loads((float_dir / b.MANIFEST).read_text())
+    manifest["files"]["run.json"] = (float_dir / "run.json").stat().st_size
+    (float_dir / b.MANIFEST).write_text(json.dumps(manifest))
+
+    result = _batch(archive, out)
+    assert result.exit_code == 0, result.output
+    assert "1 skipped (1 unchanged)" in result.output
+    line = (
+        "mission dimes: beacons.csv line 3: field 'offset_s' of source B1: given 0.0 s; "
+        "the arrivals support 30.5 s on 1 of 1 floats that hear it (sim1)"
+    )
+    assert f"rafostrack batch: {line}" in result.stderr
+    [row] = list(csv.DictReader((out / FINDINGS_NAME).open()))
+    assert (row["mission"], row["id"], row["contradicting_floats"]) == ("dimes", "B1", "sim1")
