@@ -135,6 +135,7 @@ class ChecksConfig:
     enabled: bool = setting()
     z_score: float = setting("> 0", _positive)
     fix_tolerance_km: float = setting("> 0", _positive)
+    position_tolerance_km: float = setting("> 0", _positive)
     clock_tolerance_s: float = setting("> 0", _positive)
     offset_tolerance_s: float = setting("> 0", _positive)
     drift_tolerance_s_per_day: float = setting("> 0", _positive)

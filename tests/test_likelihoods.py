@@ -79,9 +79,15 @@ def test_a_wild_hand_label_is_widened_not_collapsed_onto(sim_mission):
 
 
 def test_an_end_fix_far_from_every_particle_is_widened(sim_mission):
+    """Without the metadata checks, the filter widens an end fix that no particle is near;
+    with them (the default), calibration names the fix and tracks with the arrivals' end."""
     sim = sim_mission.floats[0]
     info = dataclasses.replace(sim.info, end_lat=sim.info.end_lat + 2.0)  # ~220 km off
-    config = with_overrides(load_config(), filter={"particles": 300})
-    out = track_record(FloatProblem(sim_mission.beacons, info, config), sim.record)
+    unchecked = with_overrides(load_config(), filter={"particles": 300}, checks={"enabled": False})
+    out = track_record(FloatProblem(sim_mission.beacons, info, unchecked), sim.record)
     assert any("end fix" in w and "widened" in w for w in out.warnings)
     assert np.all(np.isfinite(out.track[["lat", "lon", "sd_km", "smaj_km"]].to_numpy()))
+    checked = with_overrides(unchecked, checks={"enabled": True})
+    out = track_record(FloatProblem(sim_mission.beacons, info, checked), sim.record)
+    assert any("field 'end_fix'" in w and "the arrivals support" in w for w in out.warnings)
+    assert np.sqrt(np.mean(position_errors_km(out.track, sim.truth) ** 2)) < 10.0

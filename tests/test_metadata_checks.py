@@ -165,3 +165,23 @@ def test_a_launch_in_the_wrong_hemisphere_is_named_and_moved(simulated, launch_l
     )
     moved = tracked.info
     assert abs(moved.launch_lat - info.launch_lat) * 111 < 60 and abs(moved.launch_lon - info.launch_lon) * 60 < 60
+
+
+def test_a_wrong_source_position_is_named_and_the_source_moved():
+    """A source's table position 25 km off, on a 240-day float that passes it at changing
+    bearings: named on that source only, and the corrected table puts it back within a few
+    km. (On a shorter record, or where the float keeps one bearing, a position error is an
+    offset or a drift to the arrivals, and is named as that.)"""
+    beacons, (info,) = synthetic_scenario(days=240, rng=12)
+    info = dataclasses.replace(info, max_signals=8, source=("floats.csv", 2))
+    beacons = dataclasses.replace(beacons, source_file="beacons.csv", source_line=np.arange(2, len(beacons) + 2))
+    model = dataclasses.replace(CONFIG.model, toa_sigma_s=1.0, clutter_rate=0.5)
+    sim = simulate_mission(beacons, [info], model, np.random.default_rng(12)).floats[0]
+    lat, lon = displace(beacons.lat[3:4], beacons.lon[3:4], np.array([15.0]), np.array([-20.0]))
+    simulated = (truth_estimate(sim), sim.record, beacons, sim.info)
+    calibration, checks = _checked(simulated, beacon_changes={"lat": (3, float(lat[0])), "lon": (3, float(lon[0]))})
+    contradicted = [(c.id, c.field) for c in calibration.checks if c.outcome == CONTRADICTED]
+    assert contradicted == [("B4", "position")]
+    assert abs(checks[("B4", "position")].supported - 25.0) < 5.0
+    back = calibration.beacons
+    assert np.hypot((back.lat[3] - beacons.lat[3]) * 111.0, (back.lon[3] - beacons.lon[3]) * 59.0) < 5.0

@@ -38,9 +38,9 @@ from ..summaries.estimates import Estimate
 from . import kalman
 from .association import fit_association
 from .detection import fit_detection, heard_nowhere
-from .metadata_checks import CONTRADICTED, MetadataCheck, end_alternatives, timing_checks
+from .metadata_checks import CONTRADICTED, MetadataCheck, timing_checks, z_of
 from .noise import direct_probability, fit_multipath
-from .release import released_problem, used, with_supported_clock, with_supported_fixes
+from .release import Key, key_of, released_problem, used, with_supported_fixes
 from .timing_problem import (
     MIN_ARRIVALS as MIN_ARRIVALS,
 )
@@ -53,6 +53,8 @@ from .timing_problem import (
 )
 
 INITIAL_CLOCK_RATE_SD_S_PER_DAY = 0.01
+MAX_RELEASES = 4  # table values released at most per calibration (`_checked_fit`)
+RELEASE_TRIALS = 3  # contradicted values tried per release
 
 # The config keys calibration may set, (section, key).
 CALIBRATED_KEYS = (
@@ -228,17 +230,13 @@ def calibrate(
         return None
     timing = _fit_timing(built, problem, start)
     checks: list[MetadataCheck] = []
-    info = problem.info
     if problem.config.checks.enabled:
-        checks = timing_checks(timing.problem, timing.fit, timing.priors, timing.heard, timing.mid, problem.beacons,
-                               problem.info, problem.config.checks)  # fmt: skip
-        if any(c.outcome == CONTRADICTED for c in checks):
-            timing, checks, info = _released_fit(estimate, checks, problem, timing.fit.hyper)
-        checks = [used(c) for c in checks]
+        timing, checks = _checked_fit(built, timing, problem)
     fit = timing.fit
     values = _quantised(_timing_values(fit))
     corrected = corrected_beacons(problem.beacons, timing.heard, fit, _speeds_fitted(problem.config))
-    clocked = with_supported_fixes(dataclasses.replace(info, clock_residual=(timing.problem.time, fit.clock_s)), checks)
+    clocked = dataclasses.replace(problem.info, clock_residual=(timing.problem.time, fit.clock_s))
+    clocked = with_supported_fixes(clocked, checks)
     timed = _with_values(problem.config, values).model
     detection = _fit_detection(estimate, record, problem, corrected, clocked, timed)
     associated, association_report = _fit_noise(record, timing, detection.beacons, clocked, timed)
@@ -291,20 +289,30 @@ def _fit_timing(
     return _TimingFit(timing, heard, fit, left_out, noise.model.multipath_fraction, priors, mid)
 
 
-def _released_fit(
-    estimate: Estimate, checks: list[MetadataCheck], problem: FloatProblem, start: kalman.Hyper
-) -> tuple[_TimingFit, list[MetadataCheck], FloatInfo]:
-    """The timing fit with every contradicted value released (`release`): the float clock's
-    offsets set to the arrivals' values, the others' priors widened; where the checks allow
-    two readings (`end_alternatives`), the one of higher evidence. The fit, its reading and
-    the float's description it was fitted with."""
-    fits = []
-    for reading in end_alternatives(checks):
-        info = with_supported_clock(problem.info, reading)
-        built = timing_problem(estimate, problem.beacons, info, problem.config)
-        assert built is not None  # the same labels gave the first fit
-        fits.append((_fit_timing(released_problem(built, reading, problem.beacons), problem, start), reading, info))
-    return max(fits, key=lambda fit: fit[0].fit.log_evidence)
+def _checked_fit(
+    built: tuple[kalman.Problem, NDArray[np.intp], NDArray[np.float64]], timing: _TimingFit, problem: FloatProblem
+) -> tuple[_TimingFit, list[MetadataCheck]]:
+    """The table values checked against the arrivals (`metadata_checks`), and the contradicted
+    ones released one at a time (`release`): of the `RELEASE_TRIALS` strongest
+    contradictions not yet released, the one whose release gives the fit of highest
+    evidence, until none is left (at most `MAX_RELEASES`). The fit and its checks, each with
+    the value the track uses."""
+    released: set[Key] = set()
+    for _ in range(MAX_RELEASES + 1):
+        checks = timing_checks(timing.problem, timing.fit, timing.priors, timing.heard, timing.mid, problem.beacons,
+                               problem.info, problem.config.checks)  # fmt: skip
+        candidates = [c for c in checks if c.outcome == CONTRADICTED and key_of(c) not in released]
+        if not candidates or len(released) == MAX_RELEASES:
+            break
+        trials = []
+        for check in sorted(candidates, key=z_of, reverse=True)[:RELEASE_TRIALS]:
+            keys = released | {key_of(check)}
+            trials.append(
+                (_fit_timing(released_problem(built, keys, problem.beacons), problem, timing.fit.hyper), keys)
+            )
+        timing, released = max(trials, key=lambda trial: trial[0].fit.log_evidence)
+    # A value contradicted only before a release (an echo) is not a finding.
+    return timing, [used(c) for c in checks]
 
 
 def _timing_values(fit: kalman.KalmanFit) -> dict[tuple[str, str], float]:

@@ -47,6 +47,7 @@ what callers use.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -128,6 +129,9 @@ class KalmanFit:
     position_cov_km2: NDArray[np.float64]  # (K, 2, 2) posterior covariance of the positions
     nuisance_cov_km2: NDArray[np.float64]  # (K, 2, 2) the part of it due to clock and timing
     log_evidence: float
+    # (H, 2) the heard sources' fitted displacement from the table (east, north km), where
+    # their positions were unknowns (`Problem.source_positions`); else zeros.
+    source_shift_km: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
 
     def track(self, time: NDArray[np.datetime64]) -> pd.DataFrame:
         return pd.DataFrame({"time": time, "lat": self.lat, "lon": self.lon})
@@ -182,4 +186,9 @@ def fit(
         position_cov_km2=total,
         nuisance_cov_km2=nuisance,
         log_evidence=log_ml,
+        source_shift_km=(
+            np.column_stack([u[problem.per_beacon(3)], u[problem.per_beacon(4)]])
+            if problem.source_positions
+            else np.zeros((problem.n_heard, 2))
+        ),
     )

@@ -42,6 +42,8 @@ class KalmanPriors:
     # (`Problem.released`): its corrections are the data's, under these wide priors.
     released_offset_s: float = 300.0
     released_drift_s_per_day: float = 0.2
+    source_position_km: float = 0.5  # per axis, where positions are unknowns (`Problem.source_positions`)
+    released_position_km: float = 100.0
     clock_rate_s_per_day: float = 0.1  # of the clock residual's rate at launch
     mean_current_km_per_day: float = 20.0
 
@@ -100,6 +102,11 @@ class Problem:
     # fix (None: the end offset was not measured, no row).
     clock_sd_s: tuple[float, float | None] = (0.5, 0.5)
     released: NDArray[np.bool_] | None = None  # (H,) sources under `KalmanPriors.released_*`
+    # The heard sources' positions as unknowns too (east, north km from the table's, under
+    # `KalmanPriors.source_position_km`, or `released_position_km` for the sources in
+    # `released_positions`): for the metadata checks, and for a fit that moves a source.
+    source_positions: bool = False
+    released_positions: NDArray[np.bool_] | None = None  # (H,)
 
     @property
     def n_nodes(self) -> int:
@@ -111,7 +118,7 @@ class Problem:
 
     @property
     def n_unknowns(self) -> int:
-        return NODE * self.n_nodes + 3 + 3 * self.n_heard
+        return NODE * self.n_nodes + 3 + (5 if self.source_positions else 3) * self.n_heard
 
     # Static unknowns after the nodes: vbar (2), ds, then a_i, d_i, ds_i per heard beacon.
     @property
@@ -124,7 +131,8 @@ class Problem:
         return NODE * self.n_nodes + 2
 
     def per_beacon(self, block: int) -> NDArray[np.intp]:
-        """Indices of the per-beacon unknowns: block 0 = a_i, 1 = d_i, 2 = ds_i."""
+        """Indices of the per-beacon unknowns: block 0 = a_i, 1 = d_i, 2 = ds_i, and with
+        `source_positions` 3 = the source's east, 4 = its north displacement (km)."""
         return NODE * self.n_nodes + 3 + block * self.n_heard + np.arange(self.n_heard)
 
 
@@ -207,6 +215,9 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
     offsets, drifts, slownesses = (problem.per_beacon(block)[i] for block in range(3))
     slow = problem.slowness_s_per_m + u[problem.ds] + u[slownesses]
     a, d = u[offsets], u[drifts]
+    source_entries: list[tuple[NDArray, NDArray]] = []
+    if problem.source_positions:
+        r, source_entries = _moved_source_ranges(problem, u, at_lat, at_lon, slow)
     predicted = problem.delay_s + a + d * problem.drift_days + u[NODE * k + CLOCK] + r * slow
     scale = np.sqrt(weight)
     resid = problem.toa_s - predicted
@@ -220,12 +231,30 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
             (slownesses, scale * r),
             (offsets, scale),
             (drifts, scale * problem.drift_days),
+            *[(col, scale * value) for col, value in source_entries],
         ],
         # log sqrt(w): constant in the hyperparameters; rows of weight 0 (surely not the
         # direct path) carry no information and no term.
         float(np.sum(np.log(scale[scale > 0]))),
     )
     return resid
+
+
+def _moved_source_ranges(
+    problem: Problem, u: NDArray, at_lat: NDArray, at_lon: NDArray, slow: NDArray
+) -> tuple[NDArray, list[tuple[NDArray, NDArray]]]:
+    """Ranges (m) from the arrivals' nodes to their sources displaced by their position
+    unknowns, and those unknowns' Jacobian entries (s per km, central differences)."""
+    i = problem.beacon
+    east, north = problem.per_beacon(3)[i], problem.per_beacon(4)[i]
+    blat, blon = displace(problem.beacon_lat[i], problem.beacon_lon[i], u[east], u[north])
+    step = 0.1  # km
+    entries = []
+    for col, (de, dn) in ((east, (step, 0.0)), (north, (0.0, step))):
+        ahead = range_m(at_lat, at_lon, *displace(blat, blon, de, dn))
+        behind = range_m(at_lat, at_lon, *displace(blat, blon, -de, -dn))
+        entries.append((col, (ahead - behind) / (2 * step) * slow))
+    return range_m(at_lat, at_lon, blat, blon), entries
 
 
 def _pair_whitening(var_0: NDArray, cov: NDArray, var_1: NDArray) -> tuple[NDArray, NDArray, NDArray]:
@@ -306,9 +335,23 @@ def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> 
         (problem.per_beacon(0), np.where(released, priors.released_offset_s, priors.offset_s)),
         (problem.per_beacon(1), np.where(released, priors.released_drift_s_per_day, priors.drift_s_per_day)),
         (problem.per_beacon(2), priors.beacon_sound_speed_m_s * s0 * s0),
+        *(
+            [
+                (problem.per_beacon(3), position_prior_sd(problem, priors)),
+                (problem.per_beacon(4), position_prior_sd(problem, priors)),
+            ]
+            if problem.source_positions
+            else []
+        ),
     ):
         sds = np.broadcast_to(np.asarray(sd, dtype=float), idx.shape)
         rows.add(u[idx] / sds, [(idx, 1 / sds)], -float(np.sum(np.log(sds))))
+
+
+def position_prior_sd(problem: Problem, priors: KalmanPriors) -> NDArray[np.float64]:
+    """(H,) the prior sd of each heard source's position, per axis (km)."""
+    released = np.zeros(problem.n_heard, bool) if problem.released_positions is None else problem.released_positions
+    return np.where(released, priors.released_position_km, priors.source_position_km)
 
 
 def _end_fix(problem: Problem, u: NDArray, rows: Rows) -> int:

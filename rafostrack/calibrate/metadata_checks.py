@@ -37,7 +37,7 @@ from ..domain import BeaconTable, FloatInfo
 from ..model.geodesy import displace
 from . import kalman
 from .kalman_evidence import solved
-from .kalman_problem import CLOCK, NODE
+from .kalman_problem import CLOCK, NODE, position_prior_sd
 
 CONSISTENT, CONTRADICTED, UNDETERMINED, ESTIMATED = "consistent", "contradicted", "undetermined", "estimated"
 
@@ -87,6 +87,13 @@ class MetadataCheck:
             f"{where}: field '{self.field}' of {self.id}: given {given}; the arrivals support {supported}; "
             "tracked with the arrivals' value"
         )
+
+
+def z_of(check: MetadataCheck) -> float:
+    """How many of the arrivals' sds the table's value lies from theirs (0: cannot tell)."""
+    if check.supported is None or not check.sd:
+        return 0.0
+    return abs(check.supported - (check.given or 0.0)) / check.sd
 
 
 def warnings_of(checks: tuple[MetadataCheck, ...] | list[MetadataCheck]) -> list[str]:
@@ -162,20 +169,8 @@ def timing_checks(
     columns += [*problem.per_beacon(0), *problem.per_beacon(1)]
     post = _Posterior.of(problem, fit, priors, np.array(sorted(set(columns))))
     found = _fix_checks(problem, post, info, checks) + _clock_checks(problem, post, info, checks)
-    return found + _source_checks(problem, post, priors, heard, mid_days, beacons, checks)
-
-
-def end_alternatives(found: list[MetadataCheck]) -> list[list[MetadataCheck]]:
-    """The readings of `found` to choose between by the timing fit's evidence: where both the
-    end fix and the end clock offset are contradicted, each was checked with the other held,
-    and a wrong clock at the end shifts every arrival alike, which a moved position takes up
-    in part (and the reverse): one may be the other's echo. Two readings then, each with one
-    of them undetermined; else `found` alone."""
-    fix = next((c for c in found if c.field == "end_fix"), None)
-    clock = next((c for c in found if c.field == "clock_offset_end_s"), None)
-    if fix is None or clock is None or not fix.outcome == clock.outcome == CONTRADICTED:
-        return [found]
-    return [[dataclasses.replace(c, outcome=UNDETERMINED) if c is echo else c for c in found] for echo in (fix, clock)]
+    found += _source_checks(problem, post, priors, heard, mid_days, beacons, checks)
+    return found + position_checks(problem, fit, priors, heard, beacons, checks)
 
 
 def _clock_index(problem: kalman.Problem) -> list[int]:
@@ -228,9 +223,9 @@ def _clock_checks(
     through the drift since launch (the launch offset taken as right unless its own check
     contradicts it); an end offset the table leaves out is estimated."""
     file, line = _float_source(info)
-    start_sd, end_sd = problem.clock_sd_s
+    start_sd, end_sd = _clock_sd(problem)  # an end offset released by calibration: no prior (inf)
     last = NODE * (problem.n_nodes - 1) + CLOCK
-    if problem.end_sd_km is None or end_sd is None:
+    if problem.end_sd_km is None or not info.has_end_clock:
         start = _clock_level_check(post, [CLOCK], [start_sd], info, checks)
         if problem.end_sd_km is None:
             return [start]
@@ -317,3 +312,58 @@ def _source_checks(
             found.append(MetadataCheck(file, line, name, field, given, round(given + correction, digits),
                                        round(sd_d, digits), unit, outcome))  # fmt: skip
     return found
+
+
+def position_checks(
+    problem: kalman.Problem,
+    fit: kalman.KalmanFit,
+    priors: kalman.KalmanPriors,
+    heard: NDArray[np.intp],
+    beacons: BeaconTable,
+    checks: ChecksConfig,
+) -> list[MetadataCheck]:
+    """Each heard source's position: the timing fit's problem with the sources' positions as
+    unknowns too (`Problem.source_positions`), one Gauss-Newton step from the fit, and per
+    source the arrivals' estimate of its displacement with the priors of its position,
+    offset and drift taken out (a displacement along the float's bearing is an offset; one
+    across it shows only as the bearing changes: a source heard from one direction is
+    undetermined)."""
+    moved = dataclasses.replace(problem, source_positions=True)
+    start = fit.unknowns if problem.source_positions else np.concatenate([fit.unknowns, np.zeros(2 * problem.n_heard)])
+    lin = kalman.linearise(moved, start, fit.weight, priors)
+    _, factor, step = solved(lin, fit.hyper)
+    columns = np.concatenate([moved.per_beacon(block) for block in (3, 4, 0, 1)])
+    rhs = np.zeros((moved.n_unknowns, len(columns)))
+    rhs[columns, np.arange(len(columns))] = 1.0
+    post = _Posterior(start + step, columns, factor.solve(rhs))
+    released = np.zeros(problem.n_heard, bool) if problem.released is None else problem.released
+    position_sd = position_prior_sd(moved, priors)
+    found = []
+    for h, row in enumerate(heard):
+        index = [moved.per_beacon(block)[h] for block in (3, 4, 0, 1)]
+        p_a = priors.released_offset_s if released[h] else priors.offset_s
+        p_d = priors.released_drift_s_per_day if released[h] else priors.drift_s_per_day
+        prior_sd = np.array([position_sd[h]] * 2 + [p_a, p_d])
+        found.append(_position_check(data_only(*post.block(index), prior_sd), int(row), beacons, checks))
+    return found
+
+
+def _position_check(
+    arrivals: tuple[NDArray, NDArray] | None, row: int, beacons: BeaconTable, checks: ChecksConfig
+) -> MetadataCheck:
+    """One source's position from the arrivals' estimate of (east, north, a, d)."""
+    file = beacons.source_file or "beacons.csv"
+    line = None if beacons.source_line is None else int(beacons.source_line[row])
+    given = (float(beacons.lat[row]), float(beacons.lon[row]))
+    name = str(beacons.beacon_id[row])
+    if arrivals is None:
+        return MetadataCheck(file, line, name, "position", 0.0, None, None, "km", UNDETERMINED, given_lat_lon=given)
+    shift, cov = arrivals[0][:2], arrivals[1][:2, :2]  # the true position's displacement from the table's
+    size = float(np.hypot(*shift))
+    direction = shift / size if size > 0 else np.array([1.0, 0.0])
+    sd = float(np.sqrt(direction @ cov @ direction))
+    outcome = outcome_of(size, sd, checks.position_tolerance_km, checks.z_score)
+    lat, lon = displace(np.array(given[0]), np.array(given[1]), shift[0], shift[1])
+    supported = (round(float(lat), 4), round(float(lon), 4))
+    return MetadataCheck(file, line, name, "position", 0.0, round(size, 2), round(sd, 2), "km", outcome,
+                         given_lat_lon=given, supported_lat_lon=supported)  # fmt: skip

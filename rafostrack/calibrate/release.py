@@ -1,9 +1,16 @@
 """What calibration does with a table value that the arrivals contradict (`metadata_checks`):
-the timing fit is refitted with that value's prior released (a fix's sd to
-`RELEASED_FIX_SD_KM`, a source's offset and drift to `KalmanPriors.released_*`) or, for the
-float clock's offsets, the arrivals' values taken as the measurements (with the arrivals'
-sd), so that the track, the clock and the corrected beacon table follow the arrivals; a
-contradicted fix is replaced by the position the arrivals support. Values the arrivals cannot decide keep the table's.
+the timing fit is refitted with that value's prior released, so that the track, the clock
+and the corrected beacon table follow the arrivals: a fix's sd widened to
+`RELEASED_FIX_SD_KM`, the clock's launch offset to `RELEASED_CLOCK_SD_S` and its end offset
+unmeasured, a source's offset and drift to `KalmanPriors.released_*`, and a source's
+position made an unknown of `KalmanPriors.released_position_km`. A contradicted fix is then
+replaced by the position the arrivals support, for the particle filter.
+
+Values are released one at a time (`calibrate._checked_fit`): a wrong value pulls the fit,
+and with it other values' checks (a wrong source position moves the track, and the end fix
+then looks wrong too); once the culprit is released, its echoes are consistent again. The
+arrivals' estimate of a value does not depend on its prior, so a released value stays
+contradicted in the checks after its release: the checks always compare with the table.
 """
 
 from __future__ import annotations
@@ -18,55 +25,43 @@ from . import kalman
 from .metadata_checks import CONTRADICTED, ESTIMATED, MetadataCheck
 
 RELEASED_FIX_SD_KM = 100.0
+RELEASED_CLOCK_SD_S = 120.0
 
 TimingProblem = tuple[kalman.Problem, NDArray[np.intp], NDArray[np.float64]]  # problem, heard rows, mid days
+Key = tuple[str, str]  # (id, field) of a table value
 
 
-def released_problem(built: TimingProblem, checks: list[MetadataCheck], beacons: BeaconTable) -> TimingProblem:
-    """The timing problem with the prior of every contradicted value released (module docstring)."""
+def key_of(check: MetadataCheck) -> Key:
+    return (check.id, check.field)
+
+
+def released_problem(built: TimingProblem, released: set[Key], beacons: BeaconTable) -> TimingProblem:
+    """The timing problem with the prior of every value in `released` released (module docstring)."""
     problem, heard, mid = built
-    contradicted = {(c.id, c.field) for c in checks if c.outcome == CONTRADICTED}
-    fields = {field for _, field in contradicted}
+    fields = {field for _, field in released}
     start_sd, end_sd = problem.clock_sd_s
-    sources = {name for name, field in contradicted if field in ("offset_s", "drift_s_per_day")}
-    released = np.array([str(beacons.beacon_id[row]) in sources for row in heard], dtype=bool)
+    names = [str(beacons.beacon_id[row]) for row in heard]
+    timing = np.array([(n, "offset_s") in released or (n, "drift_s_per_day") in released for n in names], dtype=bool)
+    moved = np.array([(n, "position") in released for n in names], dtype=bool)
+    end_sd_km = problem.end_sd_km
+    if "end_fix" in fields and end_sd_km is not None:
+        end_sd_km = RELEASED_FIX_SD_KM
     return (
         dataclasses.replace(
             problem,
             launch_sd_km=RELEASED_FIX_SD_KM if "launch_fix" in fields else problem.launch_sd_km,
-            end_sd_km=RELEASED_FIX_SD_KM
-            if "end_fix" in fields and problem.end_sd_km is not None
-            else problem.end_sd_km,
+            end_sd_km=end_sd_km,
             clock_sd_s=(
-                _clock_sd(checks, "clock_offset_start_s", start_sd) or start_sd,
-                _clock_sd(checks, "clock_offset_end_s", end_sd),
+                RELEASED_CLOCK_SD_S if "clock_offset_start_s" in fields else start_sd,
+                None if "clock_offset_end_s" in fields else end_sd,
             ),
-            released=released,
+            released=timing,
+            source_positions=bool(moved.any()),
+            released_positions=moved if moved.any() else None,
         ),
         heard,
         mid,
     )
-
-
-def _clock_sd(checks: list[MetadataCheck], field: str, sd: float | None) -> float | None:
-    """A clock offset's prior sd: the arrivals' sd where they contradict the table (the offset
-    itself is then theirs, `with_supported_clock`), else as it was."""
-    for check in checks:
-        if check.field == field and check.outcome == CONTRADICTED and check.sd is not None and sd is not None:
-            return max(sd, check.sd)
-    return sd
-
-
-def with_supported_clock(info: FloatInfo, checks: list[MetadataCheck]) -> FloatInfo:
-    """`info` with each contradicted clock offset replaced by the arrivals' value."""
-    for check in checks:
-        if check.outcome != CONTRADICTED or check.supported is None:
-            continue
-        if check.field == "clock_offset_start_s":
-            info = dataclasses.replace(info, clock_offset_start_s=check.supported)
-        elif check.field == "clock_offset_end_s":
-            info = dataclasses.replace(info, clock_offset_end_s=check.supported)
-    return info
 
 
 def used(check: MetadataCheck) -> MetadataCheck:

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from ..config import Config
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo, elapsed_days
+from ..model.geodesy import displace
 from ..summaries.estimates import Estimate
 from . import kalman
 
@@ -102,6 +103,7 @@ def without_sources(
         beacon_lat=problem.beacon_lat[~drop],
         beacon_lon=problem.beacon_lon[~drop],
         released=None if problem.released is None else problem.released[~drop],
+        released_positions=None if problem.released_positions is None else problem.released_positions[~drop],
     ), mid[~drop]
 
 
@@ -118,13 +120,26 @@ def track_at(
 def corrected_beacons(
     beacons: BeaconTable, heard: NDArray[np.intp], fit: kalman.KalmanFit, speeds_fitted: bool
 ) -> BeaconTable:
-    """The beacon table with the fitted offset and drift corrections, and the fitted sound
-    speeds when `speeds_fitted` (not when the user set the sound speed)."""
+    """The beacon table with the fitted offset and drift corrections, the fitted positions of
+    sources the fit moved, and the fitted sound speeds when `speeds_fitted` (not when the
+    user set the sound speed)."""
     offset, drift = beacons.offset_s.copy(), beacons.drift_s_per_day.copy()
     offset[heard] += fit.offset_s
     drift[heard] += fit.drift_s_per_day
+    if np.any(fit.source_shift_km):
+        lat, lon = displace(
+            beacons.lat[heard], beacons.lon[heard], fit.source_shift_km[:, 0], fit.source_shift_km[:, 1]
+        )
+        beacons = dataclasses.replace(beacons, lat=_put(beacons.lat, heard, lat), lon=_put(beacons.lon, heard, lon))
     if not speeds_fitted:
         return dataclasses.replace(beacons, offset_s=offset, drift_s_per_day=drift)
     speeds = np.full(len(beacons), np.nan) if beacons.sound_speed_m_s is None else beacons.sound_speed_m_s.copy()
     speeds[heard] = fit.beacon_sound_speed_m_s
     return dataclasses.replace(beacons, offset_s=offset, drift_s_per_day=drift, sound_speed_m_s=speeds)
+
+
+def _put(values: NDArray, rows: NDArray[np.intp], new: NDArray) -> NDArray:
+    """A copy of `values` with `new` at `rows`."""
+    out = values.copy()
+    out[rows] = new
+    return out
