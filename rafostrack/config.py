@@ -133,6 +133,7 @@ class ChecksConfig:
     """The table values checked against the arrivals (`rafostrack.calibrate.metadata_checks`)."""
 
     enabled: bool = setting()
+    source_scan: bool = setting()
     z_score: float = setting("> 0", _positive)
     fix_tolerance_km: float = setting("> 0", _positive)
     position_tolerance_km: float = setting("> 0", _positive)

@@ -15,6 +15,7 @@ from support import truth_estimate
 from rafostrack.calibrate import calibrate
 from rafostrack.calibrate.launch_check import launch_check
 from rafostrack.calibrate.metadata_checks import CONSISTENT, CONTRADICTED, ESTIMATED, data_only, warnings_of
+from rafostrack.calibrate.source_scan import source_scan
 from rafostrack.config import load_config, with_overrides
 from rafostrack.model.geodesy import displace
 from rafostrack.problem import FloatProblem
@@ -185,3 +186,34 @@ def test_a_wrong_source_position_is_named_and_the_source_moved():
     assert abs(checks[("B4", "position")].supported - 25.0) < 5.0
     back = calibration.beacons
     assert np.hypot((back.lat[3] - beacons.lat[3]) * 111.0, (back.lon[3] - beacons.lon[3]) * 59.0) < 5.0
+
+
+@pytest.mark.parametrize("shift_s", [600.0, -30.0])
+def test_a_source_in_the_wrong_slot_or_far_off_is_found_by_the_scan(simulated, shift_s):
+    """The source scan finds a source whose table offset is a slot (600 s) or 30 s off,
+    where its signals are never labelled to it, and only that source."""
+    estimate, record, beacons, info = simulated
+    true = float(beacons.offset_s[2])
+    offset = beacons.offset_s.copy()
+    offset[2] = true + shift_s
+    wrong = FloatProblem(dataclasses.replace(beacons, offset_s=offset), info, CONFIG)
+    (check,) = source_scan(wrong, estimate, record, info)
+    assert (check.id, check.field, check.given) == ("B3", "offset_s", true + shift_s)
+    assert abs(check.supported - true) < 3.0
+    assert check.warning().startswith(f"beacons.csv: line 4: field 'offset_s' of B3: given {true + shift_s:.4g} s")
+
+
+def test_a_source_active_before_its_table_start_is_found_by_the_scan(simulated):
+    estimate, record, beacons, info = simulated
+    start = beacons.start.copy()
+    start[5] = info.launch_time + np.timedelta64(30, "D")
+    late = FloatProblem(dataclasses.replace(beacons, start=start), info, CONFIG)
+    (check,) = source_scan(late, estimate, record, info)
+    assert (check.id, check.field) == ("B6", "start")
+    first_window = min(w.time for w in record.windows if w.n_signals)
+    assert np.datetime64(check.supported.rstrip("Z")) - first_window < np.timedelta64(3, "D")
+
+
+def test_the_scan_finds_nothing_in_right_tables(simulated):
+    estimate, record, beacons, info = simulated
+    assert source_scan(FloatProblem(beacons, info, CONFIG), estimate, record, info) == []

@@ -50,12 +50,12 @@ class MetadataCheck:
     line: int | None
     id: str
     field: str
-    given: float | None  # None: not in the table
-    supported: float | None  # the arrivals' value; None: they cannot tell
+    given: float | str | None  # None: not in the table; a time as ISO 8601 (UTC)
+    supported: float | str | None  # the arrivals' value; None: they cannot tell
     sd: float | None
     unit: str
     outcome: str
-    used: float | None = None  # the value the track used (set once calibration has decided)
+    used: float | str | None = None  # the value the track used (set once calibration has decided)
     # For the fixes: the positions, given and supported (lat, lon); given and supported
     # above are then 0 and the distance between them (km).
     given_lat_lon: tuple[float, float] | None = None
@@ -76,7 +76,9 @@ class MetadataCheck:
             )
         if self.outcome != CONTRADICTED:
             return None
-        if self.given_lat_lon is not None and self.supported_lat_lon is not None:
+        if self.unit == "time":
+            given, supported = str(self.given or "(empty)"), str(self.supported)
+        elif self.given_lat_lon is not None and self.supported_lat_lon is not None:
             given = "{:.3f}, {:.3f}".format(*self.given_lat_lon)
             lat, lon = self.supported_lat_lon
             supported = f"{lat:.3f}, {lon:.3f} ({_number(self.supported)} km away, sd {_number(self.sd)} km)"
@@ -91,7 +93,7 @@ class MetadataCheck:
 
 def z_of(check: MetadataCheck) -> float:
     """How many of the arrivals' sds the table's value lies from theirs (0: cannot tell)."""
-    if check.supported is None or not check.sd:
+    if not isinstance(check.supported, float) or isinstance(check.given, str) or not check.sd:
         return 0.0
     return abs(check.supported - (check.given or 0.0)) / check.sd
 
@@ -101,8 +103,8 @@ def warnings_of(checks: tuple[MetadataCheck, ...] | list[MetadataCheck]) -> list
     return [w for w in (c.warning() for c in checks) if w is not None]
 
 
-def _number(value: float | None) -> str:
-    return "?" if value is None else f"{value:.4g}"
+def _number(value: float | str | None) -> str:
+    return "?" if value is None else value if isinstance(value, str) else f"{value:.4g}"
 
 
 def data_only(mean: NDArray, cov: NDArray, prior_sd: NDArray) -> tuple[NDArray, NDArray] | None:

@@ -27,6 +27,7 @@ from collections.abc import Callable
 from ..calibrate import Calibration, calibrate
 from ..calibrate.launch_check import launch_check
 from ..calibrate.metadata_checks import CONTRADICTED, MetadataCheck, warnings_of
+from ..calibrate.source_scan import source_scan, with_supported_schedule
 from ..config import Config, with_overrides
 from ..domain import ArrivalRecord
 from ..problem import FloatProblem
@@ -115,7 +116,8 @@ def _calibrated_method(
     """The whole method (module docstring): the calibrating passes, then the last pass with
     the last calibration (or, with none, with the configured values); the output and the
     problem the last pass tracked."""
-    calibration, spent = _calibrating_passes(problem, record, told)
+    run = _calibrating_passes(problem, record, told)
+    calibration, problem = run.calibration, run.problem
     if calibration is None:
         note = f"{problem.info.float_id}: too few confident arrivals to calibrate; tracked with the configured values"
         out = Tracker.from_problem(problem).track(record, also_filtered=also_filtered, progress=told(passes))
@@ -125,34 +127,53 @@ def _calibrated_method(
         record, also_filtered=also_filtered, extra_cov=calibration.nuisance_cov_at, progress=told(passes)
     )
     report = {**calibration.report, "passes": passes}
+    scanned = {(c.id, c.field) for c in run.scanned}
+    checks = [*run.scanned, *(c for c in calibration.checks if (c.id, c.field) not in scanned)]
     out = dataclasses.replace(
         out,
         calibration=report,
-        metadata_checks=tuple(check.as_json() for check in calibration.checks),
-        warnings=[*out.warnings, *warnings_of(calibration.checks)],
-        filter_s=spent["filter_s"] + out.filter_s,
-        smoother_s=spent["smoother_s"] + out.smoother_s,
-        calibrate_s=spent["calibrate_s"],
+        metadata_checks=tuple(check.as_json() for check in checks),
+        warnings=[*out.warnings, *warnings_of(checks)],
+        filter_s=run.spent["filter_s"] + out.filter_s,
+        smoother_s=run.spent["smoother_s"] + out.smoother_s,
+        calibrate_s=run.spent["calibrate_s"],
     )
     return out, final
 
 
-def _calibrating_passes(
-    problem: FloatProblem, record: ArrivalRecord, told: PassProgress
-) -> tuple[Calibration | None, dict[str, float]]:
+@dataclasses.dataclass(frozen=True)
+class _CalibratingPasses:
+    """What the passes before the last give it: the last calibration (None: too few confident
+    arrivals in the first pass), the problem it calibrated (the beacon table corrected where
+    the source scan contradicted it), those contradicted values, and the seconds spent."""
+
+    calibration: Calibration | None
+    problem: FloatProblem
+    scanned: list[MetadataCheck]
+    spent: dict[str, float]
+
+
+def _calibrating_passes(problem: FloatProblem, record: ArrivalRecord, told: PassProgress) -> _CalibratingPasses:
     """Steps 1-2 and the passes between calibrations: the robust first pass, then
-    `[calibrate] iterations` calibrations, each but the last followed by a pass with it; the
-    last calibration (None: too few confident arrivals in the first pass) and the seconds
-    spent filtering, smoothing and calibrating."""
+    `[calibrate] iterations` calibrations, each but the last followed by a pass with it. The
+    first calibration's clock and the first pass's track feed the source scan
+    (`calibrate.source_scan`); where it contradicts the beacon table, the table is corrected
+    and calibrated again."""
     config = problem.config
     robust = problem.with_config(first_pass_config(config))
     out = _feeding_calibration(Tracker.from_problem(robust)).track(record, progress=told(1))
     spent = {"filter_s": out.filter_s, "smoother_s": out.smoother_s, "calibrate_s": 0.0}
     calibration: Calibration | None = None
+    scanned: list[MetadataCheck] = []
     for iteration in range(config.calibrate.iterations):
         started = time.perf_counter()
         start = calibration.hyper if calibration is not None else None
         fitted = calibrate(out.estimate, record, problem, start=start)
+        if fitted is not None and iteration == 0 and config.checks.enabled and config.checks.source_scan:
+            scanned = source_scan(problem, out.estimate, record, fitted.info)
+            if scanned:
+                problem = dataclasses.replace(problem, beacons=with_supported_schedule(problem.beacons, scanned))
+                fitted = calibrate(out.estimate, record, problem, start=fitted.hyper)
         spent["calibrate_s"] += time.perf_counter() - started
         if fitted is None:
             break
@@ -163,7 +184,7 @@ def _calibrating_passes(
             out = tracker.track(record, extra_cov=calibration.nuisance_cov_at, progress=told(iteration + 2))
             spent["filter_s"] += out.filter_s
             spent["smoother_s"] += out.smoother_s
-    return calibration, spent
+    return _CalibratingPasses(calibration, problem, scanned, spent)
 
 
 def _feeding_calibration(tracker: Tracker) -> Tracker:
