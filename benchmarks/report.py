@@ -37,9 +37,26 @@ def git_commit(repo: Path = REPO) -> str:
     return head + ("+dirty" if changes else "")
 
 
+LOCAL_PATH_OPTIONS = ("--out", "--csv")  # where this machine kept its files: not part of the result
+
+
+def _without_local_paths(argv: list[str]) -> list[str]:
+    """`argv` without the options that name scratch folders of the machine that ran it."""
+    kept: list[str] = []
+    skip = False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg in LOCAL_PATH_OPTIONS:
+            skip = True
+        elif not arg.startswith(tuple(f"{o}=" for o in LOCAL_PATH_OPTIONS)):
+            kept.append(arg)
+    return kept
+
+
 def stamp(argv: Sequence[str] | None = None) -> str:
     """One line: when, at which commit and with which command the section was written."""
-    argv = list(sys.argv if argv is None else argv)
+    argv = _without_local_paths(list(sys.argv if argv is None else argv))
     script = Path(argv[0])
     if script.is_absolute() and script.is_relative_to(REPO):
         argv[0] = str(script.relative_to(REPO))

@@ -36,6 +36,7 @@ MODULE = re.compile(r"^rafostrack(?:\.\w+)+$")
 # the mission directory's configuration file and the Parquet schema's metadata keys
 NOT_MODULES = {"rafostrack.toml", "rafostrack.estimate", "rafostrack.config", "rafostrack.method", "rafostrack.version"}
 PARENT = re.compile(r"(?:\.\./)+[^\s`'\")\]]*")  # a relative path upwards: it must stay inside the repository
+MACHINE = re.compile(r"(?<![\w.])/(?:work|tmp|home|root|Users)/[^\s`'\")\]]*")  # an absolute path of one machine
 ISSUE = re.compile(r"(?<![\w&/#(])#\d+\b|\bissues?\s+#?\d+|\bthe issue\b", re.IGNORECASE)
 
 
@@ -233,6 +234,7 @@ def test_no_parent_paths_or_issue_numbers(doc: Path) -> None:
     outside = [p for p in PARENT.findall(text) if not (doc.parent / p).resolve().is_relative_to(REPO)]
     assert not outside, f"{doc.name} cites paths outside the repository: {outside}"
     assert not ISSUE.findall(text), f"{doc.name} cites the issue tracker: {ISSUE.findall(text)}"
+    assert not MACHINE.findall(text), f"{doc.name} cites one machine's paths: {MACHINE.findall(text)}"
 
 
 def test_readme_is_short() -> None:
@@ -256,6 +258,7 @@ def test_checks_catch_what_they_should() -> None:
         "--scenario has no choice 'stress'"
     ]
     assert PARENT.findall("see ../shared/x.txt") == ["../shared/x.txt"]
+    assert MACHINE.findall("--out /work/scratch/x and /tmp/y not rafostrack/io/x.py") == ["/work/scratch/x", "/tmp/y"]
     assert anchors("## Leg fits (`rafostrack legs`)\n### Scale: a, b") == {"leg-fits-rafostrack-legs", "scale-a-b"}
     assert ISSUE.findall(text) == ["#12"] and not ISSUE.findall("[Outputs](#outputs), `# # # degC`")
 
