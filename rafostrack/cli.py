@@ -193,6 +193,14 @@ def main(debug: bool) -> None:
     """Track RAFOS floats from unlabelled, ranked arrival times."""
 
 
+def _check_float_file(float_file: Path) -> None:
+    """A directory given as FLOAT_FILE is named as one (not "file not found"), with the
+    command that tracks every float in it."""
+    from .io import check_arrival_file
+
+    check_arrival_file(float_file, f"; to track every float in it: rafostrack batch {float_file} --out OUT")
+
+
 def _track_inputs(
     float_file: Path,
     beacons: Path | None,
@@ -282,6 +290,7 @@ def track(
     from .run.one_float import track_float
 
     _refuse_method(method)
+    _check_float_file(float_file)
     formats = parse_formats(output_format)
     overrides = _overrides(**flags, smooth=False if no_smooth else None)
     inputs = _track_inputs(float_file, beacons, floats, launch, config_file, overrides, input_format)
@@ -290,7 +299,13 @@ def track(
     progress = progress_module.progress_for(sys.stderr, label=float_file.stem)
     try:
         result = track_float(
-            inputs, out_dir, plots=not no_plots, also_filtered=also_filtered, progress=progress, formats=formats
+            inputs,
+            out_dir,
+            plots=not no_plots,
+            also_filtered=also_filtered,
+            progress=progress,
+            formats=formats,
+            notice=lambda message: click.echo(f"rafostrack: warning: {message}", err=True),
         )
     finally:
         progress.close()
@@ -324,6 +339,7 @@ def legs(float_file, beacons, floats, launch, config_file, iterations, out_dir, 
     """
     from .legs.floats import legs_float
 
+    _check_float_file(float_file)
     overrides = _overrides(**flags)
     if iterations is not None:
         overrides.setdefault("legs", {})["iterations"] = iterations
@@ -344,7 +360,9 @@ def legs(float_file, beacons, floats, launch, config_file, iterations, out_dir, 
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--days", type=click.IntRange(min=1), help="Truncate each float to this many days.")
 @click.option(
-    "--n-floats", type=click.IntRange(min=1), default=1, show_default=True, help="Floats (synthetic scenario)."
+    "--n-floats",
+    type=click.IntRange(min=1),
+    help="Floats to simulate (default: 1 for synthetic; for dimes all 3, the most it has).",
 )
 @config_options("clutter_rate", "p_detect", "toa_sigma_s")
 @click.option("--config", "config_file", type=click.Path(path_type=Path), help="TOML with a [model] table.")
@@ -356,15 +374,21 @@ def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> N
 
     from .config import load_config
     from .sim.mission_writer import write_mission
-    from .sim.scenarios import dimes_scenario, synthetic_scenario
+    from .sim.scenarios import DIMES_FLOATS, dimes_scenario, synthetic_scenario
     from .sim.simulate import simulate_mission
 
     config = load_config((config_file,) if config_file else (), _overrides(**flags))
     rng = np.random.default_rng(seed)
     if scenario == "dimes":
-        beacons, floats = dimes_scenario()
+        if n_floats is not None and n_floats > len(DIMES_FLOATS):
+            known = ", ".join(f"float{f}" for f in DIMES_FLOATS)
+            raise InputError(
+                f"--n-floats {n_floats}: the dimes scenario has {len(DIMES_FLOATS)} floats ({known}); "
+                f"expected at most {len(DIMES_FLOATS)} (--scenario synthetic makes any number)"
+            )
+        beacons, floats = dimes_scenario(DIMES_FLOATS[: n_floats or len(DIMES_FLOATS)])
     else:
-        beacons, floats = synthetic_scenario(days=days or 60, n_floats=n_floats, rng=rng)
+        beacons, floats = synthetic_scenario(days=days or 60, n_floats=n_floats or 1, rng=rng)
     mission = simulate_mission(beacons, floats, config.model, rng, days=days)
     write_mission(mission, out_dir)
     click.echo(f"simulated {len(mission.floats)} float(s) -> {out_dir}")
@@ -391,6 +415,9 @@ def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots,
     from .batch import run_batch
 
     _refuse_method(method)
+    for root in roots:
+        if not root.exists():
+            raise InputError(f"{root}: does not exist; expected a directory holding missions")
     result = run_batch(
         roots,
         out_dir,

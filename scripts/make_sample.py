@@ -1,19 +1,22 @@
 """Generate the sample mission (simulated arrivals on the real DIMES geometry).
 
-It lives in rafostrack/data/samples/ (package data; data/samples is a link to it).
+It lives in data/samples/ (what the README's commands use and a user copies); the package
+carries a copy, rafostrack/data/samples/ (`rafostrack.sim.scenarios.sample_mission_dir`),
+which this script refreshes when it writes data/samples and a test holds equal to it.
 
 The DIMES floats 759, 767 and 811 drift between their real launch and recovery fixes;
 the 12 sound sources have their real positions, transmission slots and deployment dates;
 the arrival times are simulated with `rafostrack.sim.simulate` (see its module docstring) under
 the default model except `detection_range_km` (1000 km, the DIMES source range).
 
-    python scripts/make_sample.py          # writes rafostrack/data/samples/ (also: make sample)
+    python scripts/make_sample.py          # writes data/samples/ and its package copy (also: make sample)
     python scripts/make_sample.py /tmp/m   # elsewhere
 """
 
 from __future__ import annotations
 
 import argparse
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +26,9 @@ from rafostrack.sim.mission_writer import write_mission
 from rafostrack.sim.scenarios import dimes_scenario
 from rafostrack.sim.simulate import simulate_mission, summarize
 
-DEFAULT_OUTDIR = Path(__file__).resolve().parents[1] / "rafostrack" / "data" / "samples"
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUTDIR = ROOT / "data" / "samples"
+PACKAGE_COPY = ROOT / "rafostrack" / "data" / "samples"  # the package data: a copy of DEFAULT_OUTDIR
 SEED = 20090123
 FLOATS = ("759", "767", "811")
 
@@ -44,6 +49,10 @@ def main(argv: list[str] | None = None) -> None:
     beacons, floats = dimes_scenario(FLOATS)
     mission = simulate_mission(beacons, floats, model, np.random.default_rng(args.seed))
     write_mission(mission, args.outdir)
+    if args.outdir.resolve() == DEFAULT_OUTDIR:
+        shutil.rmtree(PACKAGE_COPY, ignore_errors=True)
+        shutil.copytree(DEFAULT_OUTDIR, PACKAGE_COPY)
+        print(f"copied to {PACKAGE_COPY} (the package data)")
 
     table = summarize(mission)
     print(f"wrote {args.outdir} (seed {args.seed})")

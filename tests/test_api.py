@@ -55,8 +55,82 @@ def _model(mission: Path) -> dict:
 def test_frames_are_checked_like_files(sim_mission_dir):
     frames = {name: pd.read_csv(sim_mission_dir / f"{name}.csv", dtype=str) for name in ("sim1", "beacons", "floats")}
     frames["beacons"].loc[0, "lat"] = "abc"
-    with pytest.raises(InputError, match=r"beacons\.csv: line 2: field 'lat': expected a number, got 'abc'"):
+    with pytest.raises(InputError, match=r"^beacons DataFrame: row 0: field 'lat': expected a number, got 'abc'"):
         rafostrack.track(frames["sim1"], beacons=frames["beacons"], floats=frames["floats"])
+
+
+def _frames(mission: Path, **read) -> dict[str, pd.DataFrame]:
+    return {name: pd.read_csv(mission / f"{name}.csv", **read) for name in ("sim1", "beacons", "floats")}
+
+
+def test_frame_messages_name_the_argument_and_row_not_a_temporary_file(sim_mission_dir, tmp_path):
+    """Errors and warnings named the temporary mission (/tmp/rafostrack-xxxx/sim1.csv, line 5);
+    a user passed DataFrames: they name the argument and the row's index label."""
+    frames = _frames(sim_mission_dir, dtype=str)
+    arrivals = frames["sim1"].iloc[10:30]  # a slice: index labels 10..29, not positions
+    bad = arrivals.copy()
+    bad.loc[13, "time"] = "yesterday"  # a text the reader refuses (not a pandas error while writing)
+    with pytest.raises(InputError) as caught:
+        rafostrack.track(bad, beacons=frames["beacons"], floats=frames["floats"])
+    assert str(caught.value).startswith("arrivals DataFrame: row 13: field 'time': expected an ISO-8601 time")
+    with pytest.raises(InputError, match=r"^arrivals DataFrame: columns: missing required column 'toa_s'"):
+        rafostrack.track(arrivals.rename(columns={"toa_s": "toa"}), beacons=frames["beacons"], floats=frames["floats"])
+    floats = frames["floats"].assign(launch_lat="x")
+    with pytest.raises(InputError, match=r"^floats DataFrame: row 0: field 'launch_lat': expected a number, got 'x'"):
+        rafostrack.track(arrivals, beacons=frames["beacons"], floats=floats)
+    with pytest.raises(InputError, match=r"^rafostrack\.track: arrivals given as a DataFrame need beacons="):
+        rafostrack.track(arrivals, floats=frames["floats"])
+    twice = pd.concat([arrivals, arrivals.loc[[15]]])  # one duplicate row, warned about
+    run = rafostrack.track(
+        twice, beacons=frames["beacons"], floats=frames["floats"], out=tmp_path, plots=False, particles=60, smooth=False
+    )
+    warning = "arrivals DataFrame: 1 duplicate row(s) (same time and toa_s) dropped (first at row 15)"
+    assert warning in run.run_info["warnings"]
+    written = (tmp_path / "sim1" / "run.json").read_text()
+    assert "rafostrack-" not in written and warning in written
+
+
+def test_which_float_the_arrivals_are(sim_mission_dir):
+    """Given the whole floats table, the API asked for float_id 'float' (a name it made up):
+    it says which floats the table holds, or takes the float the arrivals name."""
+    frames = _frames(sim_mission_dir)
+    second = frames["floats"].assign(float_id="sim2")
+    floats = pd.concat([frames["floats"], second], ignore_index=True)
+    arrivals = frames["sim1"].head(60)
+    with pytest.raises(InputError) as caught:
+        rafostrack.track(arrivals, beacons=frames["beacons"], floats=floats)
+    assert str(caught.value) == (
+        "rafostrack.track: the floats DataFrame holds 2 floats (sim1, sim2) and the arrivals DataFrame names none "
+        "(no float_id column); expected one float's arrivals and which float they are: give float_id= "
+        "(e.g. float_id='sim1'), or pass that float's row of the floats table"
+    )
+    with pytest.raises(InputError, match=r"float_id 'sim3' is not in the floats DataFrame .*; it holds sim1, sim2$"):
+        rafostrack.track(arrivals, beacons=frames["beacons"], floats=floats, float_id="sim3")
+    options = {"particles": 60, "smooth": False, "calibrate_enabled": False}
+    both = pd.concat([arrivals.assign(float_id="sim1"), arrivals.assign(float_id="sim2")])
+    with pytest.raises(InputError, match=r"the arrivals DataFrame holds the arrivals of 2 floats \(sim1, sim2\)"):
+        rafostrack.track(both, beacons=frames["beacons"], floats=floats, **options)
+    picked = rafostrack.track(both, beacons=frames["beacons"], floats=floats, float_id="sim2", **options)
+    named = rafostrack.track(arrivals.assign(float_id="sim2"), beacons=frames["beacons"], floats=floats, **options)
+    assert picked.float_id == named.float_id == "sim2"
+    pd.testing.assert_frame_equal(picked.track, named.track)
+
+
+def test_tables_are_utc_like_the_parquet_files(sim_mission_dir, tmp_path):
+    """The API's times were tz-naive while track.parquet's are UTC."""
+    run = rafostrack.track(sim_mission_dir / "sim1.csv", out=tmp_path, plots=False, particles=60, smooth=False)
+    for name in ("track", "labels", "modes"):
+        table = getattr(run, name)
+        assert str(table["time"].dt.tz) == "UTC", name
+        written = pd.read_parquet(tmp_path / "sim1" / f"{name}.parquet")["time"]
+        pd.testing.assert_series_equal(table["time"].dt.as_unit("ns"), written.dt.as_unit("ns"))
+    assert isinstance(run.plot(), Figure)
+
+
+def test_a_directory_is_named_as_one(sim_mission_dir):
+    """`rafostrack.track(DIR)` said "file not found" for a directory that exists."""
+    with pytest.raises(InputError, match=r"is a directory; expected one float's arrival file \(e\.g\. .*sim1\.csv\)$"):
+        rafostrack.track(sim_mission_dir)
 
 
 def test_unknown_option_suggests_the_key():

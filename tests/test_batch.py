@@ -431,13 +431,29 @@ def test_a_held_lock_is_respected(tree, tmp_path):
     ("make", "needle"),
     [
         (lambda p: p, "no mission directories under"),
-        (lambda p: p / "missing", "not a directory"),
+        (lambda p: p / "missing", "missing: does not exist; expected a directory holding missions"),
+        (lambda p: _a_file(p / "f.csv"), "f.csv: not a directory (expected a directory holding missions)"),
     ],
 )
 def test_usage_errors_exit_2(tmp_path, make, needle):
+    """`batch /nonexistent` said "not a directory"; it says it does not exist."""
     result = _batch(make(tmp_path), tmp_path / "out")
     assert result.exit_code == 2
     assert needle in result.output and "Traceback" not in result.output
+
+
+def _a_file(path: Path) -> Path:
+    path.write_text("x\n")
+    return path
+
+
+def test_a_run_that_skips_every_float_starts_no_worker(tree, baseline, tmp_path):
+    """A skip-only batch under --jobs 2 reported "with 1 local worker process(es)"."""
+    out = Path(shutil.copytree(baseline, tmp_path / "out"))
+    result = _batch(tree, out, "--jobs", "2")
+    assert result.exit_code == 0, result.output
+    assert "6 floats in 2 mission(s): 0 to process, 6 skipped, 0 failed before running" in result.output
+    assert "worker" not in result.output
 
 
 def test_bad_config_and_jobs_are_usage_errors(tree, tmp_path):

@@ -155,6 +155,18 @@ def test_user_errors_are_one_line_and_exit_2(mission_dir, tmp_path, args, needle
     assert "Traceback" not in result.output
 
 
+@pytest.mark.parametrize("command", ["track", "legs"])
+def test_a_directory_given_as_the_float_file_is_named_as_one(mission_dir, tmp_path, command):
+    """`rafostrack track DIR` said "file not found" for a directory that exists."""
+    result = CliRunner().invoke(main, [command, str(mission_dir), "--out", str(tmp_path)])
+    assert result.exit_code == 2
+    example = mission_dir / _float_file(mission_dir).name
+    assert result.output.strip().splitlines() == [
+        f"rafostrack: error: {mission_dir}: is a directory; expected one float's arrival file (e.g. {example}); "
+        f"to track every float in it: rafostrack batch {mission_dir} --out OUT"
+    ]
+
+
 def test_console_script_runs(mission_dir, tmp_path):
     """The installed entry point, as a user runs it."""
     exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))

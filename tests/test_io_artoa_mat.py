@@ -85,3 +85,32 @@ def test_warnings_are_the_csv_readers_naming_the_toa_entry(quality_mission, tmp_
         f"{path}: 1 TOA(s) outside the window [0, {info.window_s:g}] s dropped (0 negative, 1 beyond window_s; "
         f"first at TOA entry 2: TOA = {info.window_s + 10.0:g})"
     ) in warnings.messages
+
+
+@pytest.mark.parametrize(
+    ("content", "needle"),
+    [
+        (b"", "file is empty (0 bytes); expected an ARTOA interim MATLAB file with TOA, TOA_SEL, TOA_DATE, SOSOREF"),
+        (b"MATLAB 5.0 MAT-file", "cannot read as a MATLAB file (Mat file appears to be truncated)"),
+        (b"\x89HDF\r\n\x1a\n", "cannot read as a MATLAB v7.3 (HDF5) file"),
+    ],
+)
+def test_an_empty_or_truncated_file_is_one_line_naming_it(quality_mission, tmp_path, content, needle):
+    """A 0-byte or cut-off .mat was an internal error (MatReadError, exit 1), not an input error."""
+    from click.testing import CliRunner
+
+    from rafostrack.cli import main
+
+    mission = tmp_path / "m"
+    shutil.copytree(quality_mission, mission)
+    mat = mission / "rf0001toa.mat"
+    mat.write_bytes(content)
+    beacons = read_beacons(mission / "beacons.csv")
+    info = read_floats(mission / "floats.csv", load_config().model)["sim1"]
+    with pytest.raises(InputError) as caught:
+        read_arrivals(mat, info, beacons, Warnings())
+    assert str(caught.value).startswith(f"{mat}: {needle}")
+    result = CliRunner().invoke(main, ["track", str(mat), "--input-format", "artoa-mat", "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"rafostrack: error: {mat}: {needle}"), result.output

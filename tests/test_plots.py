@@ -361,3 +361,31 @@ def test_uncertainty_legend_off_the_data(tmp_path, monkeypatch):
     assert shot["legends"]
     for _, box in shot["legends"]:
         assert not any(box.overlaps(ax) for ax in shot["axes_px"])
+
+
+def test_map_title_is_inside_the_figure_and_beacon_labels_do_not_overlap(info):
+    """Five sources far east of the track, their edge markers almost on one another (as
+    UK1-2 and UK1-4 on float767's map, where one label hid the other), and a wide frame:
+    every label is drawn apart, and the title is not cut off at the top."""
+    from rafostrack.plots import track_map
+    from rafostrack.plots.base import figure
+
+    n = 6
+    crowd = BeaconTable(
+        beacon_id=np.array([f"UK1-{k}" for k in range(1, n + 1)], dtype=object),
+        lat=-58.3 + 0.08 * np.arange(n),
+        lon=np.full(n, -70.0),
+        offset_s=np.zeros(n),
+        drift_s_per_day=np.zeros(n),
+        start=np.full(n, NAT),
+        end=np.full(n, NAT),
+    )
+    with figure() as fig:
+        track_map.draw_track(fig, make_track(30), crowd, info)
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        ax = fig.axes[0]
+        boxes = [t.get_window_extent(renderer) for t in ax.texts if t.get_text().startswith("UK1-")]
+        assert len(boxes) == n
+        assert not [(i, j) for i in range(n) for j in range(i + 1, n) if boxes[i].overlaps(boxes[j])]
+        assert ax.title.get_window_extent(renderer).y1 <= fig.bbox.height

@@ -341,6 +341,59 @@ def test_days_cuts_the_mission_consistently_at_the_simulated_track_end(tmp_path)
         assert info.clock_offset_end_s == pytest.approx(float(expected), abs=0.01)
 
 
+def test_data_samples_is_files_and_the_package_carries_an_equal_copy(tmp_path):
+    """data/samples was a link into the package: `cp -r data/samples mymission` copied a
+    dangling link. It is a directory of files (what `make sample` writes, the one source);
+    the package data (`sample_mission_dir`) is a copy of it, byte for byte, all installed."""
+    import shutil
+    import tomllib
+    from pathlib import PurePosixPath
+
+    from rafostrack.sim.scenarios import sample_mission_dir
+
+    root = Path(__file__).resolve().parents[1]
+    samples = root / "data" / "samples"
+    assert samples.is_dir() and not samples.is_symlink()
+    assert not [p for p in samples.rglob("*") if p.is_symlink()]
+
+    def files(top: Path) -> dict[str, bytes]:
+        return {p.relative_to(top).as_posix(): p.read_bytes() for p in sorted(top.rglob("*")) if p.is_file()}
+
+    ours, package = files(samples), files(sample_mission_dir())
+    assert ours.keys() == package.keys()
+    differ = [name for name in ours if ours[name] != package[name]]
+    assert not differ, f"{differ}: rafostrack/data/samples differs from data/samples; run `make sample` (it copies)"
+    globs = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["rafostrack"]
+    paths = [PurePosixPath("data/samples", name) for name in ours]
+    missing = [p for p in paths if not any(len(p.parts) == len(PurePosixPath(g).parts) and p.match(g) for g in globs)]
+    assert not missing, f"{missing}: not in pyproject.toml's package-data (not installed)"
+    mission = Path(shutil.copytree(samples, tmp_path / "mymission"))  # what a user does
+    assert files(mission) == ours
+
+
+def test_dimes_n_floats_is_honoured_up_to_the_scenarios_three(tmp_path):
+    """`simulate --scenario dimes --n-floats N` wrote 3 floats whatever N."""
+    from click.testing import CliRunner
+
+    from rafostrack.cli import main
+
+    def floats(args: list[str]) -> list[str]:
+        out = tmp_path / str(len(list(tmp_path.iterdir())))
+        result = CliRunner().invoke(main, ["simulate", str(out), "--scenario", "dimes", "--days", "2", *args])
+        assert result.exit_code == 0, result.output
+        return list(pd.read_csv(out / "floats.csv")["float_id"])
+
+    assert floats(["--n-floats", "2"]) == ["float759", "float767"]
+    assert floats([]) == ["float759", "float767", "float811"]  # the default: all of them
+    result = CliRunner().invoke(main, ["simulate", str(tmp_path / "x"), "--scenario", "dimes", "--n-floats", "4"])
+    assert result.exit_code == 2
+    assert result.output.strip().splitlines() == [
+        "rafostrack: error: --n-floats 4: the dimes scenario has 3 floats (float759, float767, float811); "
+        "expected at most 3 (--scenario synthetic makes any number)"
+    ]
+    assert not (tmp_path / "x").exists()
+
+
 def test_echoes_arrive_after_their_source_and_carry_its_label():
     """With echo_fraction e, a detected source's signal comes a second time, Exp(tau) later,
     labelled with the source: the windows that hold a source twice are about e of those

@@ -145,3 +145,40 @@ def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_
     np.testing.assert_allclose(out.track[cols].to_numpy(), whole.track[cols].to_numpy(), rtol=1e-12, atol=1e-12)
     assert out.labels["beacon_id"].equals(whole.labels["beacon_id"])
     np.testing.assert_allclose(out.labels["prob"], whole.labels["prob"], atol=1e-9)
+
+
+@pytest.mark.parametrize("two_filter", [False, True], ids=["ffbsm", "two-filter"])
+def test_the_smoothed_tracks_ess_is_the_filters(sim_mission, two_filter):
+    """track.parquet's `ess` is documented as the filter's effective sample size: the
+    smoothed track carries it too (it carried the smoothing weights' ESS, a third of it)."""
+    sim = sim_mission.floats[0]
+    config = with_overrides(
+        load_config(), filter={"particles": 300}, calibrate={"enabled": False}, smoother={"two_filter": two_filter}
+    )
+    out = track_record(FloatProblem(sim_mission.beacons, sim.info, config), sim.record)
+    assert out.estimate.kind == "smoothed"
+    np.testing.assert_array_equal(out.track["ess"].to_numpy(), np.array(out.filter_ess))
+
+
+def test_tables_without_rows_keep_their_column_types(sim_mission, tmp_path):
+    """A float with no ambiguous window wrote a modes.parquet whose lat and lon were untyped
+    (object columns, null in Parquet): an empty table has the types of a full one."""
+    import pyarrow.parquet as pq
+
+    from rafostrack.io.writers import write_parquet
+
+    empty = build_estimate("f", [], sim_mission.beacons.beacon_id, load_config().ambiguity)
+    config = with_overrides(load_config(), filter={"particles": 100}, calibrate={"enabled": False})
+    sim = sim_mission.floats[0]
+    full = track_record(FloatProblem(sim_mission.beacons, sim.info, config), sim.record).estimate
+    for name in ("track", "labels"):
+        assert getattr(empty, name).empty and len(getattr(full, name))
+        assert getattr(empty, name).dtypes.to_dict() == getattr(full, name).dtypes.to_dict(), name
+    modes = {c: str(t) for c, t in empty.modes.dtypes.items() if c != "float_id"}
+    assert modes == dict(
+        time="datetime64[ns]", mode="int64", lat="float64", lon="float64", weight="float64", sd_km="float64"
+    )
+    assert empty.modes["float_id"].dtype == full.track["float_id"].dtype
+    write_parquet(empty.modes, tmp_path / "modes.parquet", {}, "modes")
+    schema = pq.read_schema(tmp_path / "modes.parquet")
+    assert [str(schema.field(c).type) for c in ("lat", "lon", "weight", "sd_km")] == ["double"] * 4

@@ -182,6 +182,11 @@ def _mp_context() -> multiprocessing.context.BaseContext:
     return multiprocessing.get_context()
 
 
+def local_workers(jobs: int, n_tasks: int) -> int:
+    """How many worker processes `run_local` starts for `n_tasks` tasks: none for none."""
+    return min(jobs, n_tasks) if n_tasks else 0
+
+
 def run_local(
     tasks: Sequence[Any],
     jobs: int,
@@ -194,7 +199,7 @@ def run_local(
     if not tasks:
         return
     ctx = _mp_context()
-    workers = max(1, min(jobs, len(tasks)))
+    workers = max(1, local_workers(jobs, len(tasks)))
     stderr = worker_stderr()
     stderr_start = stderr.size()
     cannot_start = _start_up_failure(ctx, stderr)

@@ -31,7 +31,7 @@ from ..errors import InputError
 from .discover import Mission, discover
 from .lock import BatchLock
 from .plan import FAILED, SKIPPED, FloatOutcome, plan
-from .pool import dask_client, run_dask, run_local
+from .pool import dask_client, local_workers, run_dask, run_local
 from .report import FINDINGS_NAME, LOG_NAME, SUMMARY_NAME, Reporter, report_findings, summary_csv, summary_table
 
 _STALE_DIR = re.compile(r"^\..+\.(tmp|trash)-\d+$")  # .<float_id>.tmp-<pid>, .<float_id>.trash-<pid>
@@ -147,12 +147,14 @@ def _run_locked(
         run_id=lock.run_id,
     )
     skipped = sum(o.status == SKIPPED for o in known)
-    if client is not None:
-        where = f"on Dask scheduler {options.scheduler}"
+    if not tasks:  # nothing to run: no worker starts
+        where = ""
+    elif client is not None:
+        where = f" on Dask scheduler {options.scheduler}"
     else:
-        where = f"with {min(options.jobs, max(len(tasks), 1))} local worker process(es)"
+        where = f" with {local_workers(options.jobs, len(tasks))} local worker process(es)"
     reporter.log(
-        f"{len(tasks) + len(known)} floats in {len(missions)} mission(s): {len(tasks)} to process {where}, "
+        f"{len(tasks) + len(known)} floats in {len(missions)} mission(s): {len(tasks)} to process{where}, "
         f"{skipped} skipped, {len(known) - skipped} failed before running"
     )
     for outcome in known:

@@ -89,6 +89,27 @@ def read_arrivals(
     return reader_for("arrivals", path, fmt).read(Path(path), info, beacons, warnings)
 
 
+def check_arrival_file(path: Path, directory_hint: str = "") -> None:
+    """InputError unless `path` is a file: a directory is named as one (with an arrival file
+    in it as the example of what is expected, and `directory_hint` after), a missing path as
+    not found."""
+    path = Path(path)
+    if path.is_dir():
+        tables = ("beacons.csv", "floats.csv")
+        arrivals = [r for r in READERS if r.kind == "arrivals"]
+        names = sorted(
+            p.name
+            for p in path.iterdir()
+            if p.name not in tables and p.is_file() and any(r.matches(p) for r in arrivals)
+        )
+        example = path / (names[0] if names else "<float_id>.csv")
+        raise InputError(f"{path}: is a directory; expected one float's arrival file (e.g. {example}){directory_hint}")
+    if not path.exists():
+        raise InputError(f"{path}: file not found; expected one float's arrival file (e.g. <float_id>.csv)")
+    if not path.is_file():
+        raise InputError(f"{path}: not a regular file; expected one float's arrival file (e.g. <float_id>.csv)")
+
+
 def float_id_of(path: Path, fmt: str | None = None) -> str:
     """The float an arrival file belongs to (the CSV format: the file's stem)."""
     return reader_for("arrivals", path, fmt).float_id(Path(path))

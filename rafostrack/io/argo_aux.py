@@ -19,6 +19,7 @@ import numpy as np
 
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from ..errors import InputError, Warnings
+from .csv_table import require_file
 from .records import build_record
 
 ARGO_EPOCH = np.datetime64("1950-01-01T00:00:00", "ns")
@@ -50,8 +51,7 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
     import xarray as xr
 
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: file not found (expected an Argo auxiliary trajectory NetCDF file)")
+    require_file(path, "expected an Argo auxiliary trajectory NetCDF file")
     try:
         ds = xr.open_dataset(path, engine="h5netcdf", decode_times=False, mask_and_scale=True)
     except (OSError, ValueError) as exc:

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from ..errors import InputError, Warnings, nearest
+from .csv_table import require_file
 from .output_formats import RAFOS_DAY_EPOCH
 from .records import build_record
 
@@ -52,10 +53,11 @@ def _names(value: Any) -> list[str]:
 
 def _load_v5(path: Path) -> dict[str, Any]:
     from scipy.io import loadmat
+    from scipy.io.matlab import MatReadError
 
     try:
         data = loadmat(path, squeeze_me=False, chars_as_strings=True)
-    except (ValueError, TypeError, OSError, NotImplementedError) as exc:
+    except (MatReadError, ValueError, TypeError, OSError, NotImplementedError) as exc:
         raise InputError(f"{path}: cannot read as a MATLAB file ({' '.join(str(exc).split())})") from None
     return {k: v for k, v in data.items() if not k.startswith("__")}
 
@@ -66,7 +68,11 @@ def _load_v73(path: Path) -> dict[str, Any]:
     import h5py
 
     out: dict[str, Any] = {}
-    with h5py.File(path, "r") as f:
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read as a MATLAB v7.3 (HDF5) file ({' '.join(str(exc).split())})") from None
+    with f:
         for name in REQUIRED:
             if name not in f:
                 continue
@@ -95,8 +101,11 @@ def read_arrivals(path: Path, info: FloatInfo, beacons: BeaconTable, warnings: W
     import h5py
 
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: file not found (expected an ARTOA interim MATLAB file)")
+    require_file(path, "expected an ARTOA interim MATLAB file")
+    if path.stat().st_size == 0:
+        raise InputError(
+            f"{path}: file is empty (0 bytes); expected an ARTOA interim MATLAB file with {', '.join(REQUIRED)}"
+        )
     data = _load_v73(path) if h5py.is_hdf5(path) else _load_v5(path)
     missing = [v for v in REQUIRED if v not in data]
     if missing:

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..domain import BeaconTable, NaT
 from ..errors import InputError
+from .csv_table import require_file
 
 _ISO = re.compile(r"^\d{4}-\d{2}-\d{2}([T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?Z?)?$")
 FIELDS = ("name", "lat", "lon", "begin", "end", "offset_s", "drift_s_per_day")
@@ -65,8 +66,7 @@ def _time(path: Path, line: int, field: str, text: str) -> np.datetime64:
 def read_beacons(path: Path) -> BeaconTable:
     """The sources of an ARTOA sound-source file (module docstring)."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: file not found (expected an ARTOA sound-source file)")
+    require_file(path, "expected an ARTOA sound-source file")
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:

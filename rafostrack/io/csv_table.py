@@ -145,14 +145,24 @@ def read_csv_table(path: Path, required: tuple[str, ...], optional: tuple[str, .
     return frame
 
 
-def _checked_header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) -> tuple[bool, list[str], int]:
-    """The file is a readable UTF-8 file with a valid header: whether it has quotes, the
-    header's columns and how many lines the header takes."""
-    expected = f"expected a CSV file with columns {', '.join(required)}"
+def require_file(path: Path, expected: str) -> None:
+    """InputError unless `path` is a regular file; `expected` says what it should be.
+
+    A path that does not exist is "file not found", a directory "is a directory" (not the
+    "file not found" of a path that is there), anything else "not a regular file".
+    """
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, not a file ({expected})")
     if not path.exists():
         raise InputError(f"{path}: file not found ({expected})")
     if not path.is_file():
         raise InputError(f"{path}: not a regular file ({expected})")
+
+
+def _checked_header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) -> tuple[bool, list[str], int]:
+    """The file is a readable UTF-8 file with a valid header: whether it has quotes, the
+    header's columns and how many lines the header takes."""
+    require_file(path, f"expected a CSV file with columns {', '.join(required)}")
     try:
         quoted = _check_utf8(path)
         header, header_lines = _read_header(path, required)

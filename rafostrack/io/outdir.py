@@ -32,6 +32,40 @@ def staging_dir(final: Path) -> Path:
     return final.parent / f".{final.name}.tmp-{os.getpid()}"
 
 
+def _alive(pid: int) -> bool:
+    """Whether process `pid` runs (or exists under another user)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_siblings(final: Path) -> list[Path]:
+    """Remove the staging and trash siblings of `final` (`.<name>.tmp-<pid>`,
+    `.<name>.trash-<pid>`) that a killed run left: those whose process is gone. Returns them."""
+    import re
+    import shutil
+
+    final = Path(final)
+    pattern = re.compile(rf"^\.{re.escape(final.name)}\.(tmp|trash)-(\d+)$")
+    removed: list[Path] = []
+    if not final.parent.is_dir():
+        return removed
+    for entry in final.parent.iterdir():
+        match = pattern.match(entry.name)
+        if match is None or int(match.group(2)) == os.getpid() or _alive(int(match.group(2))):
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
+        removed.append(entry)
+    return removed
+
+
 def swap_into_place(new: Path, final: Path) -> None:
     """Replace the directory `final` by `new` with renames: old -> trash, new -> final, delete
     trash. A reader sees the old directory or the new one, never a mixture, whenever the

@@ -37,6 +37,12 @@ USABLE_GAP_DAYS = 10.0
 _LIST_MAX = 5  # how many windows / stretches a warning lists before "and N more"
 
 
+# A record whose windows hold a usable TOA this rarely (with at least this many windows)
+# cannot give a track (`check_usable`).
+MIN_HEARD_SHARE = 0.1
+MIN_WINDOWS_FOR_SHARE = 20
+
+
 @dataclass(frozen=True)
 class EntryNames:
     """How a reader's warnings name its entries: `where(i)` names entry i ("line 12", "TOA
@@ -111,6 +117,7 @@ def window_arrivals(
     grouped = _Grouped.of(times, toa, duplicate, outside, info.max_signals)
     _warn_windows(path, info, grouped, warnings, names)
     n_stored = np.bincount(grouped.win_of_entry[grouped.stored], minlength=grouped.n_windows)
+    check_usable(path, info, toa, outside, n_stored, names)
     _warn_beaconless(path, info, beacons, grouped.win_times, n_stored, warnings)
     stored = grouped.order[grouped.stored]
     splits = np.cumsum(n_stored)[:-1]
@@ -126,6 +133,35 @@ def window_arrivals(
         for t, g, lab, q in zip(grouped.win_times, toa_groups, label_tuples, quality_groups, strict=True)
     )
     return ArrivalRecord(float_id=info.float_id, path=Path(path), windows=windows)
+
+
+def check_usable(
+    path: Path, info: FloatInfo, toa: NDArray, outside: NDArray[np.bool_], n_stored: NDArray, names: EntryNames
+) -> None:
+    """Refuse a record that cannot give a track: no usable TOA at all, or TOAs in fewer than
+    `MIN_HEARD_SHARE` of its windows (of at least `MIN_WINDOWS_FOR_SHARE`). A track from
+    such a record would follow the drift model alone; the cause is most often the TOAs'
+    unit, the window length or the wrong file, which the error says."""
+    given = ~np.isnan(toa)
+    heard = n_stored > 0
+    if heard.any() and (len(heard) < MIN_WINDOWS_FOR_SHARE or heard.mean() >= MIN_HEARD_SHARE):
+        return
+    if not given.any():
+        cause = f"every {names.toa} is empty; expected arrival times in seconds (is this the float's arrival file?)"
+    elif outside[given].all() or not heard.any():
+        values = toa[given]
+        cause = (
+            f"all {int(given.sum())} TOAs lie outside the window [0, {info.window_s:g}] s (they run from "
+            f"{values.min():g} to {values.max():g}); expected seconds from the window's opening: check the unit of "
+            f"{names.toa} (milliseconds?) and window_s in floats.csv"
+        )
+    else:
+        cause = (
+            f"only {int(heard.sum())} of {len(heard)} windows ({heard.mean():.0%}) hold a TOA inside the window "
+            f"[0, {info.window_s:g}] s ({int(outside.sum())} TOAs outside it); at least "
+            f"{MIN_HEARD_SHARE:.0%} expected: check the unit of {names.toa} and window_s in floats.csv"
+        )
+    raise InputError(f"{path}: no track from this record: {cause}")
 
 
 def _dropped_entries(

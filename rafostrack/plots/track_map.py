@@ -24,6 +24,7 @@ from matplotlib.axes import Axes
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
 from matplotlib.patches import Patch, Polygon
 from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
@@ -191,13 +192,49 @@ def _draw_beacons(ax: Axes, beacons: BeaconTable, ref_lon: float, frame: tuple[f
                    label="beacon outside the frame (on its edge, towards it)")  # fmt: skip
     points = [(b, x, y) for b, x, y in zip(beacons.beacon_id[inside], lon[inside], beacons.lat[inside], strict=True)]
     points += [(b, x, y) for b, (y, x) in zip(beacons.beacon_id[~inside], edge, strict=True)]
+    placed: list[tuple[float, float]] = []
     for b, x, y in points:
+        fx, fy = (x - lon0) / (lon1 - lon0), (y - lat0) / (lat1 - lat0)
+        (dx, dy), offset, ha, va = _label_place(fx, fy, placed)
+        placed.append((fx + dx, fy + dy))
         ax.annotate(
-            str(b), (x, y), xytext=(0, 7), textcoords="offset points", ha="center", va="bottom", fontsize=8,
+            str(b), (x, y), xytext=offset, textcoords="offset points", ha=ha, va=va, fontsize=8,
             zorder=LABEL_ZORDER, annotation_clip=True,
             bbox={"boxstyle": "round,pad=0.15", "fc": "w", "ec": "none", "alpha": 0.8},
         )  # fmt: skip
     return int((~inside).sum())
+
+
+# Where a beacon's label may go, first free first: (its centre's shift in axes fractions,
+# its offset in points, alignment). A label is about LABEL_W x LABEL_H of the axes.
+LABEL_W, LABEL_H = 0.065, 0.035
+_LABEL_PLACES = (
+    ((0.0, 0.03), (0, 7), "center", "bottom"),
+    ((0.0, -0.03), (0, -8), "center", "top"),
+    ((-0.045, 0.0), (-7, 0), "right", "center"),
+    ((0.045, 0.0), (7, 0), "left", "center"),
+    *(
+        place
+        for k in (1, 2, 3)  # then stacked further above or below
+        for place in (
+            ((0.0, 0.03 + k * LABEL_H), (0, 7 + 14 * k), "center", "bottom"),
+            ((0.0, -0.03 - k * LABEL_H), (0, -8 - 14 * k), "center", "top"),
+        )
+    ),
+)
+
+
+def _label_place(
+    fx: float, fy: float, placed: list[tuple[float, float]]
+) -> tuple[tuple[float, float], tuple[int, int], str, str]:
+    """The first of `_LABEL_PLACES` (above, below, left, right of the marker at axes
+    fractions (fx, fy), then further above or below) whose label overlaps no label `placed`
+    (their centres), else above."""
+    for shift, offset, ha, va in _LABEL_PLACES:
+        cx, cy = fx + shift[0], fy + shift[1]
+        if all(abs(cx - px) >= LABEL_W or abs(cy - py) >= LABEL_H for px, py in placed):
+            return shift, offset, ha, va
+    return _LABEL_PLACES[0]
 
 
 def _draw_fixes(ax: Axes, info: FloatInfo, ref_lon: float) -> None:
@@ -376,6 +413,18 @@ def _finish_map(
     fig.legend(handles=all_handles, loc="outside lower center", fontsize=8, frameon=False,
                ncols=min(len(all_handles), 4))  # fmt: skip
     ax.set_title(title)
+    _keep_title_inside(fig, ax)
+
+
+def _keep_title_inside(fig: Figure, ax: Axes) -> None:
+    """Lower the layout's top until the title is inside the figure: with the map's fixed
+    aspect, constrained layout can place the axes so high that the title is cut off."""
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]  # Agg canvases have one
+    fig.canvas.draw()
+    overflow = ax.title.get_window_extent(renderer).y1 - fig.bbox.height
+    engine = fig.get_layout_engine()
+    if overflow > 0 and isinstance(engine, ConstrainedLayoutEngine):
+        engine.set(rect=(0.0, 0.0, 1.0, 1.0 - (overflow + 4.0) / fig.bbox.height))
 
 
 def _span_text(times: NDArray[np.datetime64]) -> str:

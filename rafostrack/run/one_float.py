@@ -11,6 +11,7 @@ import errno
 import re
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,13 +23,14 @@ from ..config import Config, load_config
 from ..domain import ArrivalRecord, FloatInfo
 from ..errors import InputError, Warnings, nearest
 from ..io import float_id_of, read_arrivals, read_beacons, read_floats
-from ..io.outdir import check_output_dir, staging_dir, swap_into_place
+from ..io.outdir import check_output_dir, remove_stale_siblings, staging_dir, swap_into_place
 from ..io.output_formats import write_estimate
 from ..io.writers import file_digest, write_json
 from ..problem import FloatProblem
 from .method import track_record
 from .one_pass import TrackOutput
 from .progress import NoProgress, Progress
+from .resources import available_bytes, memory_warning
 
 MISSION_CONFIG = "rafostrack.toml"
 EARLIEST_TIME = np.datetime64("1678-01-01T00:00", "ns")  # the readers' earliest accepted time
@@ -176,8 +178,11 @@ def track_float(
     also_filtered: bool = False,
     progress: Progress | None = None,
     formats: tuple[str, ...] = ("parquet",),
+    notice: Callable[[str], None] | None = None,
 ) -> TrackResult:
     """Track one float and write `out_root/<float_id>/`: Parquet tables, plots, run.json.
+    `notice` is told, before tracking, of a run the machine's memory may not hold
+    (`run.resources`); the warning goes into run.json too.
 
     `track.parquet`, `labels.parquet` and `modes.parquet` hold the smoothed estimate (the
     filtered one when the smoother is off; their metadata `estimate` says which);
@@ -193,10 +198,17 @@ def track_float(
     progress.phase("reading inputs")
     loaded = load_float(inputs)
     final = _float_dir(Path(out_root), loaded.problem.info.float_id)
+    too_big = memory_warning(loaded.problem.config.filter.particles, len(loaded.record.windows), available_bytes())
+    if too_big is not None and notice is not None:
+        notice(too_big)
     progress.phase("tracking")
     output = track_record(loaded.problem, loaded.record, also_filtered=also_filtered, progress=progress.step)
+    if too_big is not None:
+        output = dataclasses.replace(output, warnings=[too_big, *output.warnings])
     track_s = time.perf_counter() - started
     staging = staging_dir(final)
+    stale = [f"removed {path} (left by an interrupted run)" for path in remove_stale_siblings(final)]
+    output = dataclasses.replace(output, warnings=[*output.warnings, *stale])
     try:
         if staging.exists():
             shutil.rmtree(staging)

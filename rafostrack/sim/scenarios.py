@@ -37,8 +37,11 @@ def _read_package_csv(name: str) -> pd.DataFrame:
     return pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False)
 
 
+DIMES_FLOATS = ("759", "767", "811")  # the DIMES floats of `dimes_scenario`: rows of data/dimes_floats.csv
+
+
 def dimes_scenario(
-    float_ids: tuple[str, ...] | list[str] = ("759", "767", "811"), window_open_s: float = 3600.0
+    float_ids: tuple[str, ...] | list[str] = DIMES_FLOATS, window_open_s: float = 3600.0
 ) -> tuple[BeaconTable, list[FloatInfo]]:
     """The DIMES sound sources and floats (real geometry, deployment dates and clock offsets).
 

@@ -19,7 +19,6 @@ from numpy.typing import ArrayLike, NDArray
 from ..config import AmbiguityConfig
 from ..domain import Cloud, Particles, Window
 from ..filtering.filter import Step
-from ..filtering.resampling import ess
 from ..smoothing.ffbsm import Smoothed
 from .posterior import Modes, two_modes
 
@@ -131,7 +130,7 @@ class EstimateBuilder:
                 smaj,
                 smin,
                 angle,
-                step.ess if weights is None else ess(w),
+                step.ess,  # the filter's, smoothed or not (the column's documented meaning)
                 window.n_signals,
                 step.loglik,
                 modes.ambiguous,
@@ -164,8 +163,8 @@ class EstimateBuilder:
     def result(self) -> Estimate:
         return Estimate(
             kind=self.kind,
-            track=_frame(self._track, TRACK_COLUMNS, {"n_signals": "int64", "ambiguous": "bool"}),
-            labels=_frame(self._labels, LABEL_COLUMNS, {"rank": "int64"}),
+            track=_frame(self._track, TRACK_COLUMNS, {"n_signals": "int64", "ambiguous": "bool"}, ("status",)),
+            labels=_frame(self._labels, LABEL_COLUMNS, {"rank": "int64"}, ("beacon_id",)),
             modes=_frame(self._modes, MODE_COLUMNS, {"mode": "int64"}),
         )
 
@@ -228,7 +227,19 @@ def runs_of(times: NDArray[np.datetime64], flags: ArrayLike) -> list[tuple[np.da
     return [(times[a], times[b - 1]) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
-def _frame(rows: list[tuple], columns: tuple[str, ...], dtypes: dict[str, str]) -> pd.DataFrame:
-    frame = pd.DataFrame(rows, columns=list(columns)).astype(dtypes)
+def _frame(
+    rows: list[tuple], columns: tuple[str, ...], dtypes: dict[str, str], texts: tuple[str, ...] = ()
+) -> pd.DataFrame:
+    """The table of `rows` with `dtypes` and `time` a datetime.
+
+    With no rows, the other columns get the types rows would give them (`time` in ns,
+    `float_id` and `texts` text, the rest float64), not pandas' untyped object columns (an
+    empty modes.parquet had null-typed lat and lon)."""
+    frame = pd.DataFrame(rows, columns=list(columns))
+    if frame.empty:
+        text = pd.Series(["x"]).dtype  # what pandas gives a column of text (str, or object before pandas 3)
+        named = {"time": "datetime64[ns]", "float_id": text, **dict.fromkeys(texts, text)}
+        frame = frame.astype({c: named.get(c, "float64") for c in columns if c not in dtypes})
+    frame = frame.astype(dtypes)
     frame["time"] = pd.to_datetime(frame["time"])
     return frame
