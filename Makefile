@@ -6,17 +6,22 @@ BIN := $(VENV)/bin
 # $(STAMP) adds the test and Dask extras (tests, lint, benchmarks, figures).
 STAMP := $(VENV)/.installed
 RUNTIME := $(VENV)/.installed-runtime
+# The editable install puts the repository on sys.path (a .pth file), so that `import
+# rafostrack` run from the folder that holds the clone (itself named rafostrack) finds the
+# package, not the clone folder as an empty namespace package (setuptools' default editable
+# finder comes after the current directory).
+EDITABLE := --config-settings editable_mode=compat
 
 .PHONY: demo test test-fast lint format bench sample clean
 
 $(RUNTIME): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e .
+	$(BIN)/python -m pip install --quiet -e . $(EDITABLE)
 	touch $(RUNTIME)
 
 $(STAMP): $(RUNTIME)
-	$(BIN)/python -m pip install --quiet -e '.[test,dask]'
+	$(BIN)/python -m pip install --quiet -e '.[test,dask]' $(EDITABLE)
 	touch $(STAMP)
 
 demo: $(RUNTIME)
