@@ -163,3 +163,22 @@ def test_make_demo_installs_only_the_package():
     demo = closure("demo")
     assert "pip install" in demo and "[test" not in demo and "dask" not in demo
     assert "[test,dask]" in closure("test")
+
+
+def test_the_api_imports_from_the_folder_that_holds_a_clone_named_rafostrack(tmp_path):
+    """Run beside a clone named `rafostrack` (the folder a newcomer saves the README's
+    example in), `import rafostrack` finds the installed package, not the clone folder as
+    an empty namespace package (the Makefile's editable install puts the repository on
+    sys.path)."""
+    import subprocess
+    import sys
+
+    (tmp_path / "rafostrack").mkdir()  # what a clone looks like from its parent: no __init__.py
+    done = subprocess.run(
+        [sys.executable, "-c", "import rafostrack; print(callable(rafostrack.track))"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"
