@@ -6,22 +6,25 @@ BIN := $(VENV)/bin
 # $(STAMP) adds the test and Dask extras (tests, lint, benchmarks, figures).
 STAMP := $(VENV)/.installed
 RUNTIME := $(VENV)/.installed-runtime
-# The editable install puts the repository on sys.path (a .pth file), so that `import
-# rafostrack` run from the folder that holds the clone (itself named rafostrack) finds the
-# package, not the clone folder as an empty namespace package (setuptools' default editable
-# finder comes after the current directory).
-EDITABLE := --config-settings editable_mode=compat
+# After the editable install, the repository goes on sys.path too (a .pth file), so that
+# `import rafostrack` run from the folder that holds the clone (itself named rafostrack)
+# finds the package, not the clone folder as an empty namespace package: setuptools'
+# editable finder comes after the current directory. (Its own 'compat' mode does the same
+# but is deprecated, with a warning block at every install.)
+ON_PATH := $(BIN)/python -c 'import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()["purelib"], "rafostrack-checkout.pth").write_text("$(CURDIR)\n")'
 
 .PHONY: demo test test-fast lint format bench sample clean
 
 $(RUNTIME): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e . $(EDITABLE)
+	$(BIN)/python -m pip install --quiet -e .
+	$(ON_PATH)
 	touch $(RUNTIME)
 
 $(STAMP): $(RUNTIME)
-	$(BIN)/python -m pip install --quiet -e '.[test,dask]' $(EDITABLE)
+	$(BIN)/python -m pip install --quiet -e '.[test,dask]'
+	$(ON_PATH)
 	touch $(STAMP)
 
 demo: $(RUNTIME)
