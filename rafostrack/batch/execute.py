@@ -31,7 +31,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import InputError
-from ..io.outdir import swap_into_place
+from ..io.outdir import staging_dir, swap_into_place
 from ..io.writers import write_json
 from .lock import read_lock_info
 from .plan import FAILED, MANIFEST, MANIFEST_FORMAT, PROCESSED, FloatOutcome, FloatTask
@@ -47,7 +47,7 @@ def process_float(task: FloatTask) -> FloatOutcome:
     if planned_version != __version__:  # a Dask worker with another installation, say
         reason = f"this worker runs rafostrack {__version__}, the batch process {planned_version}; install the same"
         return FloatOutcome(task.mission, task.float_id, FAILED, reason)
-    staging = task.out_dir.parent / f".{task.float_id}.tmp-{os.getpid()}"
+    staging = staging_dir(task.out_dir)
     try:
         if staging.exists():
             shutil.rmtree(staging)

@@ -19,8 +19,6 @@ value each one's arrivals support (times: the median instant). A `run.json` with
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import statistics
 from collections.abc import Iterable, Mapping, Sequence
@@ -29,6 +27,7 @@ from datetime import UTC, datetime
 from pathlib import Path, PurePath
 from typing import Any
 
+from ..io.writers import csv_text
 from .plan import FAILED, SKIPPED, FloatOutcome
 
 FINDINGS_NAME = "metadata-findings.csv"
@@ -320,9 +319,4 @@ def _is_current(outcome: FloatOutcome) -> bool:
 
 def findings_csv(findings: Sequence[Finding]) -> str:
     """The text of metadata-findings.csv: a header (`FINDINGS_COLUMNS`) and one row per finding."""
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=FINDINGS_COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    for finding in findings:
-        writer.writerow(finding.row())
-    return buf.getvalue()
+    return csv_text(FINDINGS_COLUMNS, (finding.row() for finding in findings))

@@ -18,8 +18,6 @@ Guarantees:
 
 from __future__ import annotations
 
-import csv
-import io
 import time
 from collections.abc import Sequence
 from datetime import UTC, datetime
@@ -28,6 +26,7 @@ from typing import TextIO
 
 from tqdm import tqdm
 
+from ..io.writers import csv_text
 from .findings import FINDINGS_NAME, batch_findings, findings_csv
 from .plan import FAILED, PROCESSED, SKIPPED, FloatOutcome
 
@@ -130,12 +129,7 @@ def summary_table(outcomes: Sequence[FloatOutcome], elapsed_s: float, out: Path)
 
 def summary_csv(outcomes: Sequence[FloatOutcome]) -> str:
     """The text of batch-summary.csv: a header and one row per float."""
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    for outcome in outcomes:
-        writer.writerow(outcome.row())
-    return buf.getvalue()
+    return csv_text(SUMMARY_COLUMNS, (outcome.row() for outcome in outcomes))
 
 
 def report_findings(reporter: Reporter, outcomes: Sequence[FloatOutcome], out: Path) -> str:

@@ -28,13 +28,13 @@ from typing import Any, TextIO
 from .. import __version__
 from ..config import load_config
 from ..errors import InputError
+from ..io.outdir import SIBLING
 from .discover import Mission, discover
 from .lock import BatchLock
 from .plan import FAILED, SKIPPED, FloatOutcome, plan
 from .pool import dask_client, local_workers, run_dask, run_local
 from .report import FINDINGS_NAME, LOG_NAME, SUMMARY_NAME, Reporter, report_findings, summary_csv, summary_table
 
-_STALE_DIR = re.compile(r"^\..+\.(tmp|trash)-\d+$")  # .<float_id>.tmp-<pid>, .<float_id>.trash-<pid>
 _STALE_FILE = re.compile(r"^\..+\.tmp$")  # atomic_path's temporary files
 
 
@@ -199,7 +199,7 @@ def clean_stale(out: Path, missions: Iterable[Mission], log: Callable[[str], Non
         except OSError:
             continue
         for entry in entries:
-            if entry.is_dir(follow_symlinks=False) and _STALE_DIR.match(entry.name):
+            if entry.is_dir(follow_symlinks=False) and SIBLING.match(entry.name):
                 shutil.rmtree(entry.path, ignore_errors=True)
                 log(f"removed {entry.path} (left by an interrupted run)")
             elif entry.is_file(follow_symlinks=False) and _STALE_FILE.match(entry.name):

@@ -328,12 +328,12 @@ def _motion(problem: Problem, u: NDArray, hyper: Hyper, priors: KalmanPriors, ro
 def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> None:
     """Priors of the static parameters (slowness sds from sound-speed sds: ds = -dc / c^2)."""
     s0 = problem.slowness_s_per_m
-    released = np.zeros(problem.n_heard, dtype=bool) if problem.released is None else problem.released
+    offset_sd, drift_sd = timing_prior_sd(problem, priors)
     for idx, sd in (
         (np.array([problem.vbar, problem.vbar + 1]), priors.mean_current_km_per_day),
         (np.array([problem.ds]), priors.sound_speed_m_s * s0 * s0),
-        (problem.per_beacon(0), np.where(released, priors.released_offset_s, priors.offset_s)),
-        (problem.per_beacon(1), np.where(released, priors.released_drift_s_per_day, priors.drift_s_per_day)),
+        (problem.per_beacon(0), offset_sd),
+        (problem.per_beacon(1), drift_sd),
         (problem.per_beacon(2), priors.beacon_sound_speed_m_s * s0 * s0),
         *(
             [
@@ -346,6 +346,15 @@ def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> 
     ):
         sds = np.broadcast_to(np.asarray(sd, dtype=float), idx.shape)
         rows.add(u[idx] / sds, [(idx, 1 / sds)], -float(np.sum(np.log(sds))))
+
+
+def timing_prior_sd(problem: Problem, priors: KalmanPriors) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(H,) each heard source's prior sd of its offset (s) and of its drift (s/day)."""
+    released = np.zeros(problem.n_heard, dtype=bool) if problem.released is None else problem.released
+    return (
+        np.where(released, priors.released_offset_s, priors.offset_s),
+        np.where(released, priors.released_drift_s_per_day, priors.drift_s_per_day),
+    )
 
 
 def position_prior_sd(problem: Problem, priors: KalmanPriors) -> NDArray[np.float64]:

@@ -30,11 +30,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import with_overrides
-from ..domain import ArrivalRecord, Particles
+from ..domain import ArrivalRecord, BeaconTable, Particles
 from ..likelihoods import arrivals_from_config
 from ..model.geodesy import displace, range_m
 from ..problem import FloatProblem
-from .metadata_checks import CONTRADICTED, MetadataCheck
+from .metadata_checks import CONTRADICTED, MetadataCheck, float_source
 
 LAUNCH_WINDOWS = 6
 LAUNCH_DAYS = 6.0
@@ -45,10 +45,8 @@ DRIFT_KM_PER_DAY = 10.0  # how far the float may go in those days, folded into t
 KM_PER_S = 1.48
 
 
-def _grid(problem: FloatProblem, at: np.datetime64) -> tuple[NDArray, NDArray]:
-    """Nodes every `GRID_KM` within `REACH_KM` of a source active at `at`."""
-    beacons = problem.beacons
-    active = beacons.active_at(at)
+def _grid(beacons: BeaconTable, active: NDArray[np.bool_]) -> tuple[NDArray, NDArray]:
+    """Nodes every `GRID_KM` within `REACH_KM` of an `active` source."""
     lat0, lon0 = float(np.mean(beacons.lat[active])), float(np.mean(beacons.lon[active]))
     half = REACH_KM + float(range_m(lat0, lon0, beacons.lat[active], beacons.lon[active]).max()) / 1e3
     k = np.arange(-half, half + GRID_KM, GRID_KM)
@@ -75,7 +73,7 @@ def launch_check(problem: FloatProblem, record: ArrivalRecord) -> tuple[Metadata
                              problem.beacons.lon[active]).min()) / 1e3  # fmt: skip
     if reach_km <= REACH_KM:
         return None  # within the array's reach: the Kalman smoother's check weighs it
-    lat, lon = _grid(problem, windows[0].time)
+    lat, lon = _grid(problem.beacons, active)
     lat, lon = np.append(lat, info.launch_lat), np.append(lon, info.launch_lon)
     sigma = float(np.hypot(config.model.toa_sigma_s, (GRID_KM + DRIFT_KM_PER_DAY * LAUNCH_DAYS) / KM_PER_S / 2))
     likelihood = arrivals_from_config(problem.beacons, info, config).with_toa_sigma(sigma)
@@ -84,7 +82,7 @@ def launch_check(problem: FloatProblem, record: ArrivalRecord) -> tuple[Metadata
     best = int(np.argmax(loglik))
     distance_km = float(range_m(lat[best], lon[best], info.launch_lat, info.launch_lon)) / 1e3
     log_ratio = float(loglik[best] - loglik[-1])
-    file, line = info.source if info.source is not None else ("floats.csv", None)
+    file, line = float_source(info)
     contradicted = distance_km > GROSS_KM and log_ratio > config.checks.z_score**2 / 2
     check = MetadataCheck(
         file, line, info.float_id, "launch_fix", 0.0, round(distance_km, 1), GRID_KM,

@@ -37,7 +37,7 @@ from ..domain import BeaconTable, FloatInfo
 from ..model.geodesy import displace
 from . import kalman
 from .kalman_evidence import solved
-from .kalman_problem import CLOCK, NODE, position_prior_sd
+from .kalman_problem import CLOCK, NODE, position_prior_sd, timing_prior_sd
 
 CONSISTENT, CONTRADICTED, UNDETERMINED, ESTIMATED = "consistent", "contradicted", "undetermined", "estimated"
 
@@ -137,21 +137,35 @@ class _Posterior:
 
     @classmethod
     def of(
-        cls, problem: kalman.Problem, fit: kalman.KalmanFit, priors: kalman.KalmanPriors, columns: NDArray
+        cls,
+        problem: kalman.Problem,
+        unknowns: NDArray,
+        fit: kalman.KalmanFit,
+        priors: kalman.KalmanPriors,
+        columns: NDArray,
     ) -> _Posterior:
-        lin = kalman.linearise(problem, fit.unknowns, fit.weight, priors)
+        """One Gauss-Newton step of `problem` from `unknowns` (the fit's weights and
+        hyperparameters): the solution and the covariance columns of `columns`."""
+        lin = kalman.linearise(problem, unknowns, fit.weight, priors)
         _, factor, step = solved(lin, fit.hyper)
         rhs = np.zeros((problem.n_unknowns, len(columns)))
         rhs[columns, np.arange(len(columns))] = 1.0
-        return cls(fit.unknowns + step, np.asarray(columns), factor.solve(rhs))
+        return cls(unknowns + step, np.asarray(columns), factor.solve(rhs))
 
     def block(self, idx: list[int] | NDArray) -> tuple[NDArray, NDArray]:
         at = [int(np.flatnonzero(self.columns == i)[0]) for i in idx]
         return self.mean[list(idx)], self.cov_columns[np.ix_(list(idx), at)]
 
 
-def _float_source(info: FloatInfo) -> tuple[str, int | None]:
+def float_source(info: FloatInfo) -> tuple[str, int | None]:
+    """The file and line of the float's row in its table, for a check's message."""
     return info.source if info.source is not None else ("floats.csv", None)
+
+
+def beacon_source(beacons: BeaconTable, row: int) -> tuple[str, int | None, str]:
+    """The file, line and id of a source's row in its table, for a check's message."""
+    line = None if beacons.source_line is None else int(beacons.source_line[row])
+    return beacons.source_file or "beacons.csv", line, str(beacons.beacon_id[row])
 
 
 def timing_checks(
@@ -169,7 +183,7 @@ def timing_checks(
     last = problem.n_nodes - 1
     columns = [0, 1, CLOCK, NODE * last, NODE * last + 1, NODE * last + CLOCK]
     columns += [*problem.per_beacon(0), *problem.per_beacon(1)]
-    post = _Posterior.of(problem, fit, priors, np.array(sorted(set(columns))))
+    post = _Posterior.of(problem, fit.unknowns, fit, priors, np.array(sorted(set(columns))))
     found = _fix_checks(problem, post, info, checks) + _clock_checks(problem, post, info, checks)
     found += _source_checks(problem, post, priors, heard, mid_days, beacons, checks)
     return found + position_checks(problem, fit, priors, heard, beacons, checks)
@@ -191,7 +205,7 @@ def _fix_checks(
     problem: kalman.Problem, post: _Posterior, info: FloatInfo, checks: ChecksConfig
 ) -> list[MetadataCheck]:
     """The launch fix (first node) and, when used, the end fix (last node)."""
-    file, line = _float_source(info)
+    file, line = float_source(info)
     launch, end = [0, 1], [NODE * (problem.n_nodes - 1), NODE * (problem.n_nodes - 1) + 1]
     fixes = [("launch_fix", 0, launch, [problem.launch_sd_km] * 2)]
     if problem.end_sd_km is not None:
@@ -200,20 +214,33 @@ def _fix_checks(
     for name, node, index, prior_sd in fixes:
         arrivals = data_only(*post.block(index), np.array(prior_sd))
         given = (float(problem.lat[node]), float(problem.lon[node]))
-        if arrivals is None:
-            found.append(MetadataCheck(file, line, info.float_id, name, 0.0, None, None, "km", UNDETERMINED,
-                                       given_lat_lon=given))  # fmt: skip
-            continue
-        shift, cov_d = arrivals[0][:2], arrivals[1][:2, :2]
-        distance = float(np.hypot(*shift))
-        direction = shift / distance if distance > 0 else np.array([1.0, 0.0])
-        sd_d = float(np.sqrt(direction @ cov_d @ direction))
-        lat, lon = displace(np.array(given[0]), np.array(given[1]), shift[0], shift[1])
-        outcome = outcome_of(distance, sd_d, checks.fix_tolerance_km, checks.z_score)
-        found.append(MetadataCheck(file, line, info.float_id, name, 0.0, round(distance, 2), round(sd_d, 2), "km",
-                                   outcome, given_lat_lon=given,
-                                   supported_lat_lon=(round(float(lat), 4), round(float(lon), 4))))  # fmt: skip
+        found.append(_shift_check(file, line, info.float_id, name, given, arrivals, checks.fix_tolerance_km, checks))
     return found
+
+
+def _shift_check(
+    file: str,
+    line: int | None,
+    id_: str,
+    field: str,
+    given: tuple[float, float],
+    arrivals: tuple[NDArray, NDArray] | None,
+    tolerance_km: float,
+    checks: ChecksConfig,
+) -> MetadataCheck:
+    """A position (a fix, a source) against the arrivals' estimate of its displacement (east,
+    north km: the first two of `arrivals`' mean and covariance), judged along its direction."""
+    if arrivals is None:
+        return MetadataCheck(file, line, id_, field, 0.0, None, None, "km", UNDETERMINED, given_lat_lon=given)
+    shift, cov = arrivals[0][:2], arrivals[1][:2, :2]
+    distance = float(np.hypot(*shift))
+    direction = shift / distance if distance > 0 else np.array([1.0, 0.0])
+    sd = float(np.sqrt(direction @ cov @ direction))
+    outcome = outcome_of(distance, sd, tolerance_km, checks.z_score)
+    lat, lon = displace(np.array(given[0]), np.array(given[1]), shift[0], shift[1])
+    supported = (round(float(lat), 4), round(float(lon), 4))
+    return MetadataCheck(file, line, id_, field, 0.0, round(distance, 2), round(sd, 2), "km", outcome,
+                         given_lat_lon=given, supported_lat_lon=supported)  # fmt: skip
 
 
 def _clock_checks(
@@ -224,7 +251,7 @@ def _clock_checks(
     offset is checked through the level (both offsets' priors taken out), the end offset
     through the drift since launch (the launch offset taken as right unless its own check
     contradicts it); an end offset the table leaves out is estimated."""
-    file, line = _float_source(info)
+    file, line = float_source(info)
     start_sd, end_sd = _clock_sd(problem)  # an end offset released by calibration: no prior (inf)
     last = NODE * (problem.n_nodes - 1) + CLOCK
     if problem.end_sd_km is None or not info.has_end_clock:
@@ -251,7 +278,7 @@ def _clock_level_check(
     post: _Posterior, index: list[int], prior_sd: list[float], info: FloatInfo, checks: ChecksConfig
 ) -> MetadataCheck:
     """The launch offset against the arrivals, the clock priors at `index` taken out."""
-    file, line = _float_source(info)
+    file, line = float_source(info)
     given = info.clock_offset_start_s
     arrivals = data_only(*post.block(index), np.array(prior_sd))
     if arrivals is None:
@@ -265,7 +292,7 @@ def _clock_level_check(
 def _estimated_end_clock(post: _Posterior, index: int, info: FloatInfo, checks: ChecksConfig) -> MetadataCheck:
     """The end offset that the table leaves out: the start offset plus the clock residual at
     the end fix; undetermined where its sd exceeds the tolerance."""
-    file, line = _float_source(info)
+    file, line = float_source(info)
     mean, cov = post.block([index])
     sd = float(np.sqrt(cov[0, 0]))
     outcome = ESTIMATED if sd <= checks.clock_tolerance_s else UNDETERMINED
@@ -284,19 +311,15 @@ def _source_checks(
 ) -> list[MetadataCheck]:
     """Each heard source's offset (at its epoch: a_i - d_i mid_i) and drift, from the
     arrivals' joint estimate of (a_i, d_i) and the clock offsets."""
-    released = np.zeros(problem.n_heard, bool) if problem.released is None else problem.released
+    offset_sd, drift_sd = timing_prior_sd(problem, priors)
     found = []
     for h, row in enumerate(heard):
-        p_a = priors.released_offset_s if released[h] else priors.offset_s
-        p_d = priors.released_drift_s_per_day if released[h] else priors.drift_s_per_day
         # The clock's priors out too: a wrong clock offset moves every source's arrivals alike,
         # which is the clock's to explain, not each source's.
         index = [problem.per_beacon(0)[h], problem.per_beacon(1)[h], *_clock_index(problem)]
-        joint = data_only(*post.block(index), np.array([p_a, p_d, *_clock_sd(problem)]))
+        joint = data_only(*post.block(index), np.array([offset_sd[h], drift_sd[h], *_clock_sd(problem)]))
         arrivals = None if joint is None else (joint[0][:2], joint[1][:2, :2])
-        file = beacons.source_file or "beacons.csv"
-        line = None if beacons.source_line is None else int(beacons.source_line[row])
-        name = str(beacons.beacon_id[row])
+        file, line, name = beacon_source(beacons, int(row))
         at_epoch = np.array([1.0, -mid_days[h]])  # offset at the epoch = a - d mid
         values = (
             ("offset_s", float(beacons.offset_s[row]), at_epoch, checks.offset_tolerance_s, "s"),
@@ -332,40 +355,16 @@ def position_checks(
     undetermined)."""
     moved = dataclasses.replace(problem, source_positions=True)
     start = fit.unknowns if problem.source_positions else np.concatenate([fit.unknowns, np.zeros(2 * problem.n_heard)])
-    lin = kalman.linearise(moved, start, fit.weight, priors)
-    _, factor, step = solved(lin, fit.hyper)
     columns = np.concatenate([moved.per_beacon(block) for block in (3, 4, 0, 1)])
-    rhs = np.zeros((moved.n_unknowns, len(columns)))
-    rhs[columns, np.arange(len(columns))] = 1.0
-    post = _Posterior(start + step, columns, factor.solve(rhs))
-    released = np.zeros(problem.n_heard, bool) if problem.released is None else problem.released
+    post = _Posterior.of(moved, start, fit, priors, columns)
     position_sd = position_prior_sd(moved, priors)
+    offset_sd, drift_sd = timing_prior_sd(moved, priors)
     found = []
     for h, row in enumerate(heard):
         index = [moved.per_beacon(block)[h] for block in (3, 4, 0, 1)]
-        p_a = priors.released_offset_s if released[h] else priors.offset_s
-        p_d = priors.released_drift_s_per_day if released[h] else priors.drift_s_per_day
-        prior_sd = np.array([position_sd[h]] * 2 + [p_a, p_d])
-        found.append(_position_check(data_only(*post.block(index), prior_sd), int(row), beacons, checks))
+        prior_sd = np.array([position_sd[h], position_sd[h], offset_sd[h], drift_sd[h]])
+        arrivals = data_only(*post.block(index), prior_sd)
+        file, line, name = beacon_source(beacons, int(row))
+        given = (float(beacons.lat[row]), float(beacons.lon[row]))
+        found.append(_shift_check(file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks))
     return found
-
-
-def _position_check(
-    arrivals: tuple[NDArray, NDArray] | None, row: int, beacons: BeaconTable, checks: ChecksConfig
-) -> MetadataCheck:
-    """One source's position from the arrivals' estimate of (east, north, a, d)."""
-    file = beacons.source_file or "beacons.csv"
-    line = None if beacons.source_line is None else int(beacons.source_line[row])
-    given = (float(beacons.lat[row]), float(beacons.lon[row]))
-    name = str(beacons.beacon_id[row])
-    if arrivals is None:
-        return MetadataCheck(file, line, name, "position", 0.0, None, None, "km", UNDETERMINED, given_lat_lon=given)
-    shift, cov = arrivals[0][:2], arrivals[1][:2, :2]  # the true position's displacement from the table's
-    size = float(np.hypot(*shift))
-    direction = shift / size if size > 0 else np.array([1.0, 0.0])
-    sd = float(np.sqrt(direction @ cov @ direction))
-    outcome = outcome_of(size, sd, checks.position_tolerance_km, checks.z_score)
-    lat, lon = displace(np.array(given[0]), np.array(given[1]), shift[0], shift[1])
-    supported = (round(float(lat), 4), round(float(lon), 4))
-    return MetadataCheck(file, line, name, "position", 0.0, round(size, 2), round(sd, 2), "km", outcome,
-                         given_lat_lon=given, supported_lat_lon=supported)  # fmt: skip

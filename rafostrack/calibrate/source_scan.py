@@ -33,7 +33,7 @@ from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from ..model import measurement as m
 from ..problem import FloatProblem
 from ..summaries.estimates import Estimate
-from .metadata_checks import CONTRADICTED, MetadataCheck
+from .metadata_checks import CONTRADICTED, MetadataCheck, beacon_source
 
 MATCH_S = 10.0  # a TOA within this of a source's prediction matches it (track and timing errors)
 EXPLAINED_S = 60.0  # a TOA this near another active source's prediction may be its signal
@@ -95,8 +95,13 @@ def _background(res: _Residuals, windows: NDArray[np.bool_], window_s: float) ->
     return float(p.sum())
 
 
+def _excess_z(count: int, expected: float) -> float:
+    """How far `count` lies above what clutter gives, in Poisson sds."""
+    return (count - expected) / float(np.sqrt(max(expected, 1.0)))
+
+
 def _significant(count: int, expected: float, z: float) -> bool:
-    return count >= MIN_HITS and (count - expected) / np.sqrt(max(expected, 1.0)) > z
+    return count >= MIN_HITS and _excess_z(count, expected) > z
 
 
 def _best_shift(res: _Residuals, window_s: float) -> tuple[float, int]:
@@ -154,7 +159,6 @@ def _scan_once(
         shift, count = _best_shift(res, window_s)
         at_table = int(_hits(res, 0.0, res.active).sum())
         expected = _background(res, res.active, window_s)
-        strength = (count - expected) / np.sqrt(max(expected, 1.0))
         moved = (
             abs(shift) > config.checks.offset_tolerance_s and _significant(count, expected, z) and count > 2 * at_table
         )
@@ -164,7 +168,8 @@ def _scan_once(
             findings.append(_offset_check(beacons, row, float(np.median(res.residual_s[near]))))
         period_strength, periods = _period_checks(beacons, row, res, shift if moved else 0.0, window_s, z)
         if findings or periods:
-            candidates.append((max(float(strength) if moved else 0.0, period_strength), findings + periods))
+            strength = _excess_z(count, expected) if moved else 0.0
+            candidates.append((max(strength, period_strength), findings + periods))
     return candidates
 
 
@@ -174,14 +179,8 @@ def _scanned(beacons: BeaconTable, record: ArrivalRecord) -> int:
     return int(sum(np.sum([beacons.active_at(t)[i] for t in times]) >= MIN_HITS for i in range(len(beacons))))
 
 
-def _where(beacons: BeaconTable, row: int) -> tuple[str, int | None, str]:
-    file = beacons.source_file or "beacons.csv"
-    line = None if beacons.source_line is None else int(beacons.source_line[row])
-    return file, line, str(beacons.beacon_id[row])
-
-
 def _offset_check(beacons: BeaconTable, row: int, shift_s: float) -> MetadataCheck:
-    file, line, name = _where(beacons, row)
+    file, line, name = beacon_source(beacons, row)
     given = float(beacons.offset_s[row])
     return MetadataCheck(file, line, name, "offset_s", given, round(given + shift_s, 3), MATCH_S, "s", CONTRADICTED,
                          used=round(given + shift_s, 3))  # fmt: skip
@@ -192,7 +191,7 @@ def _period_checks(
 ) -> tuple[float, list[MetadataCheck]]:
     """The start and end against the hits at `shift_s` in the windows outside the table's
     period; the findings and the strongest one's z."""
-    file, line, name = _where(beacons, row)
+    file, line, name = beacon_source(beacons, row)
     found, strongest = [], 0.0
     for field, outside, pick in (
         ("start", res.time < beacons.start[row], np.min),
@@ -204,7 +203,7 @@ def _period_checks(
         expected = _background(res, outside, window_s)
         if not _significant(int(hits.sum()), expected, z):
             continue
-        strongest = max(strongest, (int(hits.sum()) - expected) / float(np.sqrt(max(expected, 1.0))))
+        strongest = max(strongest, _excess_z(int(hits.sum()), expected))
         given, supported = _iso(getattr(beacons, field)[row]), _iso(pick(res.time[hits]))
         found.append(
             MetadataCheck(file, line, name, field, given, supported, None, "time", CONTRADICTED, used=supported)

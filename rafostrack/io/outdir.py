@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 from ..errors import InputError
@@ -26,6 +27,10 @@ def check_output_dir(path: Path) -> None:
         )
 
 
+# A staging or trash sibling of an output directory <name> (`staging_dir`, `swap_into_place`).
+SIBLING = re.compile(r"^\.(?P<name>.+)\.(?:tmp|trash)-(?P<pid>\d+)$")
+
+
 def staging_dir(final: Path) -> Path:
     """A hidden sibling of `final` to build a new `final` in (`swap_into_place` installs it)."""
     final = Path(final)
@@ -46,17 +51,18 @@ def _alive(pid: int) -> bool:
 def remove_stale_siblings(final: Path) -> list[Path]:
     """Remove the staging and trash siblings of `final` (`.<name>.tmp-<pid>`,
     `.<name>.trash-<pid>`) that a killed run left: those whose process is gone. Returns them."""
-    import re
     import shutil
 
     final = Path(final)
-    pattern = re.compile(rf"^\.{re.escape(final.name)}\.(tmp|trash)-(\d+)$")
     removed: list[Path] = []
     if not final.parent.is_dir():
         return removed
     for entry in final.parent.iterdir():
-        match = pattern.match(entry.name)
-        if match is None or int(match.group(2)) == os.getpid() or _alive(int(match.group(2))):
+        match = SIBLING.match(entry.name)
+        if match is None or match["name"] != final.name:
+            continue
+        pid = int(match["pid"])
+        if pid == os.getpid() or _alive(pid):
             continue
         if entry.is_dir() and not entry.is_symlink():
             shutil.rmtree(entry, ignore_errors=True)

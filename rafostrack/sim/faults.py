@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from ..domain import BeaconTable, FloatInfo, NaT
+from ..io.csv_table import time_text
 from ..model.geodesy import displace
 
 FLOAT_KINDS = ("end_clock_missing", "clock_sign", "clock_offset", "launch_fix", "end_fix")
@@ -129,8 +130,8 @@ def naming_fields(fault: InjectedFault) -> tuple[str, ...]:
 
 
 def _iso(t: np.datetime64) -> str | None:
-    at = np.asarray(t, dtype="datetime64[ns]")
-    return None if np.isnat(at) else str(np.datetime_as_string(at, unit="s")) + "Z"
+    """`t` as the tables write it (`io.csv_table.time_text`), None for an empty time."""
+    return None if np.isnat(t) else time_text(t)
 
 
 def _moved(lat: float, lon: float, km: tuple[float, float], rng: np.random.Generator) -> tuple[float, float]:
