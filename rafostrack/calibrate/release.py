@@ -3,8 +3,9 @@ the timing fit is refitted with that value's prior released, so that the track, 
 and the corrected beacon table follow the arrivals: a fix's sd widened to
 `RELEASED_FIX_SD_KM`, the clock's launch offset to `RELEASED_CLOCK_SD_S` and its end offset
 unmeasured, a source's offset and drift to `KalmanPriors.released_*`, and a source's
-position made an unknown of `KalmanPriors.released_position_km`. A contradicted fix is then
-replaced by the position the arrivals support, for the particle filter.
+position made an unknown of `KalmanPriors.released_position_km`. For the particle filter, a
+contradicted launch fix is then replaced by the position the arrivals support, and a
+contradicted end fix is not used.
 
 Values are released one at a time (`calibrate._checked_fit`): a wrong value pulls the fit,
 and with it other values' checks (a wrong source position moves the track, and the end fix
@@ -72,13 +73,17 @@ def used(check: MetadataCheck) -> MetadataCheck:
 
 
 def with_supported_fixes(info: FloatInfo, checks: list[MetadataCheck]) -> FloatInfo:
-    """`info` with each contradicted fix replaced by the position the arrivals support."""
+    """`info` for the particle filter after the checks: a contradicted launch fix replaced
+    by the position the arrivals support (the filter needs a start), a contradicted end fix
+    dropped (the end of the track then rests on the arrivals; put in the arrivals' place
+    with the fix's own sd, a false alarm from a lost first pass pinned the next pass to a
+    position hundreds of km off)."""
     for check in checks:
         if check.outcome != CONTRADICTED or check.supported_lat_lon is None:
             continue
-        lat, lon = check.supported_lat_lon
         if check.field == "launch_fix":
+            lat, lon = check.supported_lat_lon
             info = dataclasses.replace(info, launch_lat=lat, launch_lon=lon)
         elif check.field == "end_fix":
-            info = dataclasses.replace(info, end_lat=lat, end_lon=lon)
+            info = dataclasses.replace(info, end_lat=float("nan"), end_lon=float("nan"))
     return info
