@@ -6,7 +6,9 @@ tables in every format asked for (`OUTPUT_FORMATS`), each file atomically:
 - `parquet`: track, labels and modes, with run metadata in the schema and units per field.
 - `csv`: the same three tables as CSV (times ISO-8601 with Z, empty = missing).
 - `netcdf`: `track.nc`, a CF-1.8 `featureType = trajectory` file (one trajectory: the float)
-  with units, long and standard names, readable by xarray (written with h5netcdf).
+  with units, long and standard names, readable by xarray, and `labels.nc`, the labels
+  table, each TOA linked to its window of `track.nc` by a CF indexed ragged array
+  (`io.netcdf`: the layout and why it is a second file, not a group).
 - `rfc`: `<float_id>.rfc`, the ARTOA track text: `**` header lines, then one line per window
   of 10 right-aligned 12-character columns InterpFlag LineNum RafosDay Temp Pres Lat Lon U V
   W (units # # # degC dbar deg deg cm/s cm/s mm/s). InterpFlag 0 where arrival times
@@ -17,7 +19,6 @@ tables in every format asked for (`OUTPUT_FORMATS`), each file atomically:
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -28,8 +29,8 @@ import pandas as pd
 from ..domain import FloatInfo
 from ..errors import InputError, nearest
 from ..model.geodesy import local_offsets_km
-from .atomic import atomic_path, write_text_atomic
-from .columns import TRACK
+from .atomic import write_text_atomic
+from .netcdf import write_labels_netcdf, write_netcdf
 from .writers import write_parquet
 
 OUTPUT_FORMATS = ("parquet", "csv", "netcdf", "rfc")
@@ -83,9 +84,10 @@ def write_estimate(
                 write_csv(frame, path)
                 written.append(path)
         elif fmt == "netcdf":
-            path = out_dir / f"track{suffix}.nc"
-            write_netcdf(tables["track"], info, path, metadata)
-            written.append(path)
+            track_path, labels_path = out_dir / f"track{suffix}.nc", out_dir / f"labels{suffix}.nc"
+            write_netcdf(tables["track"], info, track_path, metadata)
+            write_labels_netcdf(tables["labels"], tables["track"], info, labels_path, metadata, track_path.name)
+            written += [track_path, labels_path]
         elif fmt == "rfc":
             path = out_dir / f"{info.float_id}{suffix}.rfc"
             write_rfc(tables["track"], info, path, metadata)
@@ -101,59 +103,6 @@ def write_csv(frame: pd.DataFrame, path: Path) -> None:
     if "time" in frame:
         frame["time"] = pd.to_datetime(frame["time"]).dt.strftime("%Y-%m-%dT%H:%M:%SZ")
     write_text_atomic(path, frame.to_csv(index=False, lineterminator="\n"))
-
-
-def track_dataset(track: pd.DataFrame, info: FloatInfo, metadata: dict[str, Any]):
-    """The track as an xarray Dataset following CF-1.8 discrete sampling geometry, one
-    trajectory (`featureType = trajectory`, dimension `obs`, `trajectory` the float's id
-    with `cf_role = trajectory_id`)."""
-    import xarray as xr
-
-    times = pd.to_datetime(track["time"]).dt.tz_localize(None).to_numpy(dtype="datetime64[ns]")
-    data: dict[str, Any] = {}
-    for name, spec in TRACK.items():
-        if name in ("float_id", "time") or name not in track:
-            continue
-        values = track[name].to_numpy()
-        attrs: dict[str, Any] = {"long_name": spec.description}
-        if name == "ambiguous":
-            values = values.astype(np.int8)
-            attrs.update(flag_values=np.array([0, 1], dtype=np.int8), flag_meanings="single_mode two_modes")
-        elif name == "status":
-            values = values.astype(str)
-        else:
-            values = values.astype(np.int32 if name == "n_signals" else np.float64)
-            attrs["units"] = spec.units
-            if spec.standard_name:
-                attrs["standard_name"] = spec.standard_name
-        if name not in ("lat", "lon"):
-            attrs["coordinates"] = "time lat lon"
-        data[name] = ("obs", values, attrs)
-    data["lat"][2].update(axis="Y")
-    data["lon"][2].update(axis="X")
-    coords = {
-        "time": ("obs", times, {"standard_name": "time", "long_name": TRACK["time"].description, "axis": "T"}),
-        "lat": data.pop("lat"),
-        "lon": data.pop("lon"),
-    }
-    data["trajectory"] = ((), info.float_id, {"cf_role": "trajectory_id", "long_name": "the float's id"})
-    attrs = {
-        "Conventions": "CF-1.8",
-        "featureType": "trajectory",
-        "title": f"RAFOS float {info.float_id}: track estimated by rafostrack",
-        "source": f"rafostrack {metadata.get('version', '')}: ranked-signal particle filter and smoother",
-        "rafostrack_estimate": str(metadata.get("estimate", "")),
-        "rafostrack_config": json.dumps(metadata.get("config", {}), sort_keys=True),
-    }
-    ds = xr.Dataset(data, coords=coords, attrs=attrs)
-    ds["time"].encoding.update(units="seconds since 1970-01-01 00:00:00", calendar="standard", dtype="float64")
-    return ds
-
-
-def write_netcdf(track: pd.DataFrame, info: FloatInfo, path: Path, metadata: dict[str, Any]) -> None:
-    ds = track_dataset(track, info, metadata)
-    with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, engine="h5netcdf", format="NETCDF4")
 
 
 def _velocity_cm_s(track: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
