@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from support import simulated_mission_dir
 
+import rafostrack.io.atomic
 from rafostrack.config import load_config
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import SimulatedMission, simulate_mission
@@ -36,3 +37,18 @@ def quality_mission(sim_mission_dir, tmp_path_factory) -> Path:
     from field_files import mission_with_quality
 
     return mission_with_quality(sim_mission_dir, tmp_path_factory.mktemp("qmission") / "m")
+
+
+@pytest.fixture
+def atomic_writes(monkeypatch) -> list[Path]:
+    """The paths `rafostrack.io.atomic.write_text_atomic` writes during the test, in order
+    (the writes still happen)."""
+    written: list[Path] = []
+    original = rafostrack.io.atomic.write_text_atomic
+
+    def recorded(path, text):
+        written.append(Path(path))
+        original(path, text)
+
+    monkeypatch.setattr(rafostrack.io.atomic, "write_text_atomic", recorded)
+    return written

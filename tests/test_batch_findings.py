@@ -18,7 +18,6 @@ import pytest
 from click.testing import CliRunner
 from support import simulated_mission_dir
 
-import rafostrack.io.atomic
 from rafostrack import batch as b
 from rafostrack.batch.findings import (
     FINDINGS_COLUMNS,
@@ -28,6 +27,7 @@ from rafostrack.batch.findings import (
     median_value,
     mission_findings,
     parse_checks,
+    pooled_check,
 )
 from rafostrack.batch.report import report_findings
 from rafostrack.cli import main
@@ -231,6 +231,59 @@ def test_batch_findings_read_current_outputs_per_mission(tmp_path):
     assert len(unreadable) == 1 and "other/f9/run.json: cannot be read" in unreadable[0]
 
 
+CHECKS = {"z_score": 5.0, "offset_tolerance_s": 5.0, "drift_tolerance_s_per_day": 0.015}
+
+
+def _configured(float_id: str, *entries: dict[str, Any]) -> list:
+    """The checks of a run whose config holds the [checks] settings (as run.json does)."""
+    run = {"float_id": float_id, "config": {"checks": CHECKS}, "metadata_checks": list(entries)}
+    return parse_checks(run, float_id)
+
+
+def _drift(supported: float, sd: float, outcome: str) -> dict[str, Any]:
+    entry = _entry(BEACONS, 6, "B4", "drift_s_per_day", 0.0, supported, outcome, unit="s/day")
+    return {**entry, "sd": sd}
+
+
+def test_a_source_drift_no_float_is_sure_of_is_found_on_their_arrivals_together():
+    """Four floats each put B4's drift 0.03 s/day from the table's 0 with sd 0.008 (3.75 sd:
+    undetermined alone); pooled by inverse variance: 0.03 (sd 0.004), 7.5 sd and twice the
+    tolerance: contradicted, a finding with no float contradicting it."""
+    checks = [c for k in range(4) for c in _configured(f"f{k}", _drift(0.03, 0.008, "undetermined"))]
+    (finding,) = mission_findings("dimes", checks)
+    assert finding.contradicting == () and finding.n_checked == 4
+    assert (finding.pooled.value, finding.pooled.sd, finding.pooled.outcome) == (0.03, 0.004, "contradicted")
+    assert finding.supported == 0.03
+    assert finding.message() == (
+        "mission dimes: beacons.csv line 6: field 'drift_s_per_day' of source B4: given 0.0000 s/day; the arrivals "
+        "of the 4 floats that hear it support 0.0300 s/day (sd 0.0040 s/day) together (none alone is sure)"
+    )
+    row = finding.row()
+    assert (row["pooled"], row["pooled_sd"], row["pooled_outcome"], row["n_contradicted"]) == (
+        0.03, 0.004, "contradicted", 0
+    )  # fmt: skip
+
+
+def test_the_pool_weighs_each_float_by_its_precision_and_stays_quiet_within_the_tolerance():
+    """Values 0.02 (sd 0.005) and 0.0 (sd 0.01): pooled (0.02 x 40000 + 0) / 50000 = 0.016,
+    sd 50000^-1/2 = 0.00447; within 0.015 + 2 sd: consistent. Two floats at 0.03 (sd 0.0099):
+    0.03 (sd 0.007), beyond 0.015 + 2 sd but under 5 sd: undetermined. Neither is a finding."""
+    two = [*_configured("f0", _drift(0.02, 0.005, "undetermined")), *_configured("f1", _drift(0.0, 0.01, "consistent"))]
+    pooled = pooled_check(two)
+    assert pooled is not None and (pooled.value, pooled.sd, pooled.outcome) == (0.016, 0.00447, "consistent")
+    leaning = [c for k in range(2) for c in _configured(f"f{k}", _drift(0.03, 0.0099, "undetermined"))]
+    pooled = pooled_check(leaning)
+    assert pooled is not None and (pooled.value, pooled.sd, pooled.outcome) == (0.03, 0.007, "undetermined")
+    assert mission_findings("dimes", two) == [] and mission_findings("dimes", leaning) == []
+
+
+def test_a_float_own_value_and_a_source_position_are_never_pooled():
+    clock = _entry(FLOATS, 4, "f0", "clock_offset_end_s", 0.0, 30.0, "undetermined")
+    position = {**_entry(BEACONS, 5, "B3", "position", 0.0, 40.0, "undetermined", unit="km"), "sd": 1.0}
+    checks = [*_configured("f0", clock, position), *_configured("f1", position)]
+    assert mission_findings("dimes", checks) == []
+
+
 def test_the_csv_and_the_printed_lines(tmp_path):
     outcomes = _tree(
         tmp_path,
@@ -264,6 +317,9 @@ def test_the_csv_and_the_printed_lines(tmp_path):
             "n_checked": "2",
             "n_consistent": "0",
             "contradicting_floats": "float767",
+            "pooled": "",  # these runs name no [checks] settings: nothing to judge a pool by
+            "pooled_sd": "",
+            "pooled_outcome": "",
         },
         {
             "mission": "dimes",
@@ -282,6 +338,9 @@ def test_the_csv_and_the_printed_lines(tmp_path):
             "n_checked": "1",
             "n_consistent": "0",
             "contradicting_floats": "float767",
+            "pooled": "",  # these runs name no [checks] settings: nothing to judge a pool by
+            "pooled_sd": "",
+            "pooled_outcome": "",
         },
     ]
     assert stream.getvalue().splitlines() == [
@@ -310,21 +369,13 @@ def _batch(root: Path, out: Path):
     return CliRunner().invoke(main, ["batch", str(root), "--out", str(out), "--no-plots", "--jobs", "1"])
 
 
-def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive, tmp_path, monkeypatch):
+def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive, tmp_path, atomic_writes):
     """A clean mission gives a header-only metadata-findings.csv, written atomically; a float
     skipped as unchanged is read from disk (its run.json edited here, the manifest's size with it)."""
-    written: list[Path] = []
-    original = rafostrack.io.atomic.write_text_atomic
-
-    def spy(path, text):
-        written.append(Path(path))
-        original(path, text)
-
-    monkeypatch.setattr(rafostrack.io.atomic, "write_text_atomic", spy)
     out = tmp_path / "out"
     result = _batch(archive, out)
     assert result.exit_code == 0, result.output
-    assert out / FINDINGS_NAME in written
+    assert out / FINDINGS_NAME in atomic_writes
     assert (out / FINDINGS_NAME).read_text() == ",".join(FINDINGS_COLUMNS) + "\n"
     assert not list(out.glob(".*.tmp"))
     assert "metadata findings: no table value contradicted" in (out / "batch.log").read_text()

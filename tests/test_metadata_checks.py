@@ -14,7 +14,17 @@ from support import truth_estimate
 
 from rafostrack.calibrate import calibrate
 from rafostrack.calibrate.launch_check import launch_check
-from rafostrack.calibrate.metadata_checks import CONSISTENT, CONTRADICTED, ESTIMATED, data_only, warnings_of
+from rafostrack.calibrate.metadata_checks import (
+    CONSISTENT,
+    CONTRADICTED,
+    ESTIMATED,
+    UNDETERMINED,
+    MetadataCheck,
+    data_only,
+    outcome_of,
+    warnings_of,
+    with_position_alternative,
+)
 from rafostrack.calibrate.source_scan import source_scan
 from rafostrack.config import load_config, with_overrides
 from rafostrack.model.geodesy import displace
@@ -45,6 +55,48 @@ def test_data_only_estimate_equals_the_fit_without_the_prior():
 
 def test_data_only_is_none_where_the_data_say_nothing():
     assert data_only(np.zeros(1), np.array([[0.25]]), np.array([0.5])) is None
+
+
+@pytest.mark.parametrize(
+    ("correction", "sd", "outcome"),
+    [
+        (0.5, 0.5, CONSISTENT),  # within the tolerance (1), and sure of it
+        (1.8, 0.5, CONSISTENT),  # beyond the tolerance, but within 2 sd of it
+        (2.9, 1.0, CONSISTENT),  # sd at the tolerance: 2 sd of room
+        (2.8, 0.6, UNDETERMINED),  # leaning away (4.7 sd) without being sure (z = 5)
+        (0.2, 1.5, UNDETERMINED),  # too vague to tell
+        (2.6, 0.5, CONTRADICTED),  # 5.2 sd away
+        (-2.6, 0.5, CONTRADICTED),
+        (0.9, 0.1, CONSISTENT),  # 9 sd away, but within the tolerance: the difference does not matter
+        (1.2, 0.1, CONTRADICTED),
+    ],
+)
+def test_outcome_contradicted_only_when_sure_consistent_only_within_the_tolerance(correction, sd, outcome):
+    """Contradicted: |c| > max(z sd, tolerance); consistent: |c| <= tolerance + 2 sd with sd
+    <= tolerance; undetermined otherwise (tolerance 1, z 5)."""
+    assert outcome_of(correction, sd, 1.0, 5.0) == outcome
+
+
+def test_a_source_timing_contradiction_names_the_position_where_the_arrivals_cannot_check_it():
+    """US1-6's offset is contradicted and its position undetermined: the offset's warning
+    names the position as the other explanation; UK1-1's position is checked (consistent),
+    so its contradicted offset stands alone."""
+
+    def check(id_: str, field: str, outcome: str) -> MetadataCheck:
+        return MetadataCheck("beacons.csv", 4, id_, field, 360.0, 388.0, 2.0, "s", outcome)
+
+    timing = [check("US1-6", "offset_s", CONTRADICTED), check("US1-6", "drift_s_per_day", CONSISTENT),
+              check("UK1-1", "offset_s", CONTRADICTED)]  # fmt: skip
+    positions = [check("US1-6", "position", UNDETERMINED), check("UK1-1", "position", CONSISTENT)]
+    found = with_position_alternative(timing, positions)
+    assert [c.alternatives for c in found] == [("position",), (), (), (), ()]
+    assert found[0].as_json()["alternatives"] == ("position",) and "alternatives" not in found[2].as_json()
+    assert warnings_of(found) == [
+        "beacons.csv: line 4: field 'offset_s' of US1-6: given 360 s; the arrivals support 388 s (sd 2 s) "
+        "(or its 'position' is wrong: these arrivals cannot tell which); tracked with the arrivals' value",
+        "beacons.csv: line 4: field 'offset_s' of UK1-1: given 360 s; the arrivals support 388 s (sd 2 s); "
+        "tracked with the arrivals' value",
+    ]
 
 
 @pytest.fixture(scope="module")

@@ -218,3 +218,14 @@ def test_a_fault_is_named_by_a_contradicted_check_of_its_file_id_and_field():
     assert false_alarms([], []) == [] and unnamed_faults([], checks) == []
     assert json.loads(json.dumps(fault.to_json())) == fault.to_json()
     assert InjectedFault.from_json(fault.to_json()) == fault
+
+
+def test_a_source_position_fault_is_named_by_an_offset_that_names_the_position_as_its_alternative():
+    moved = InjectedFault("source_position", "beacons.csv", "US1-6", "position", [-58.33, -74.41], [-58.09, -74.15])
+    offset = {"file": "beacons.csv", "id": "US1-6", "field": "offset_s", "outcome": "contradicted"}
+    assert unnamed_faults([moved], [offset]) == [moved]  # an offset alone is another fault
+    assert false_alarms([moved], [offset]) == [offset]
+    either = {**offset, "alternatives": ["position"]}
+    assert unnamed_faults([moved], [either]) == [] and false_alarms([moved], [either]) == []
+    wrong_offset = InjectedFault("source_offset", "beacons.csv", "US1-6", "offset_s", 360.0, 390.0)
+    assert unnamed_faults([wrong_offset], [either]) == []  # and it still names an offset

@@ -15,6 +15,17 @@ mission into one finding per value (file, id, field) contradicted on at least on
 The supported value of a finding is the median, over the floats that contradict it, of the
 value each one's arrivals support (times: the median instant). A `run.json` without the key
 (written by an older version) holds no checks.
+
+A source's offset or drift is also weighed on the floats' arrivals together: each float's
+estimate x_k (sd s_k) comes from its own arrivals, independent of the others', so they pool
+by inverse variance,
+
+    x = sum(x_k / s_k^2) / sum(1 / s_k^2),    sd = sum(1 / s_k^2)^(-1/2),
+
+and the pooled value is judged by the rule of a float's check (`outcome_of`, with the
+tolerance and z-score of the runs' `[checks]`). A value no float alone is sure of, but
+their arrivals together contradict, is a finding too (`pooled`: k = 0). Tracks are not
+redone: the finding says which value to correct in the table before rerunning.
 """
 
 from __future__ import annotations
@@ -27,6 +38,7 @@ from datetime import UTC, datetime
 from pathlib import Path, PurePath
 from typing import Any
 
+from ..calibrate.metadata_checks import CONTRADICTED, outcome_of
 from ..io.writers import csv_text
 from .plan import FAILED, SKIPPED, FloatOutcome
 
@@ -48,8 +60,12 @@ FINDINGS_COLUMNS = (
     "n_checked",
     "n_consistent",
     "contradicting_floats",
+    "pooled",
+    "pooled_sd",
+    "pooled_outcome",
 )
-CONTRADICTED = "contradicted"
+# The pooled fields and the [checks] tolerance that judges each.
+POOLED_TOLERANCE = {"offset_s": "offset_tolerance_s", "drift_s_per_day": "drift_tolerance_s_per_day"}
 _SHOWN_FLOATS = 5  # float ids printed per finding (all of them are in the CSV)
 _DIGITS = {"s": 1, "km": 1, "s/day": 4, "deg": 4}
 
@@ -72,6 +88,9 @@ class Check:
     outcome: str
     given_lat_lon: LatLon = None  # a fix or a source position: given is 0, supported the distance (km)
     supported_lat_lon: LatLon = None
+    sd: float | None = None  # the sd of the float's arrivals' value
+    tolerance: float | None = None  # the run's [checks] tolerance and z-score for the field
+    z_score: float | None = None
 
     @property
     def key(self) -> tuple[str, str, str]:
@@ -106,6 +125,7 @@ class Finding:
     of_source: bool
     given_lat_lon: LatLon = None  # positions (fixes, sources): the table's
     supported_lat_lon: LatLon = None  # and the median latitude and longitude the arrivals support
+    pooled: Pooled | None = None  # a source's offset or drift on every float's arrivals together
 
     def row(self) -> dict[str, Any]:
         """One row of metadata-findings.csv."""
@@ -126,6 +146,9 @@ class Finding:
             n_checked=self.n_checked,
             n_consistent=self.n_consistent,
             contradicting_floats=";".join(self.contradicting),
+            pooled="" if self.pooled is None else self.pooled.value,
+            pooled_sd="" if self.pooled is None else self.pooled.sd,
+            pooled_outcome="" if self.pooled is None else self.pooled.outcome,
         )
 
     def message(self) -> str:
@@ -138,6 +161,12 @@ class Finding:
         if self.given_lat_lon is not None and self.supported_lat_lon is not None:
             (lat, lon), (lat_d, lon_d) = self.given_lat_lon, self.supported_lat_lon
             given, supported = f"{lat:.3f}, {lon:.3f}", f"{lat_d:.3f}, {lon_d:.3f} ({supported} away)"
+        if not self.contradicting and self.pooled is not None:
+            pooled = f"{format_value(self.pooled.value, self.unit)} (sd {format_value(self.pooled.sd, self.unit)})"
+            return (
+                f"mission {self.mission}: {where}: {what}: given {given}; the arrivals of the {self.n_checked} floats "
+                f"that hear it support {pooled} together (none alone is sure)"
+            )
         text = f"mission {self.mission}: {where}: {what}: given {given}; the arrivals support {supported}"
         if not self.of_source:
             return text
@@ -164,6 +193,9 @@ def parse_checks(run: Mapping[str, Any], float_id: str) -> list[Check]:
     if not isinstance(entries, list):
         return []
     own = str(run.get("float_id") or float_id)
+    config = run.get("config")
+    settings = config.get("checks") if isinstance(config, Mapping) else None
+    settings = settings if isinstance(settings, Mapping) else {}
     checks = []
     for entry in entries:
         if not isinstance(entry, Mapping) or not all(entry.get(k) not in (None, "") for k in ("file", "id", "field")):
@@ -182,9 +214,17 @@ def parse_checks(run: Mapping[str, Any], float_id: str) -> list[Check]:
                 outcome=str(entry.get("outcome") or "missing"),
                 given_lat_lon=_lat_lon(entry.get("given_lat_lon")),
                 supported_lat_lon=_lat_lon(entry.get("supported_lat_lon")),
+                sd=_number(entry.get("sd")),
+                tolerance=_number(settings.get(POOLED_TOLERANCE.get(str(entry["field"]), ""))),
+                z_score=_number(settings.get("z_score")),
             )
         )
     return checks
+
+
+def _number(value: Any) -> float | None:
+    value = _value(value)
+    return value if isinstance(value, float) else None
 
 
 def _value(value: Any) -> Value:
@@ -214,18 +254,51 @@ def mission_findings(mission: str, checks: Iterable[Check]) -> list[Finding]:
         seen = per_float.setdefault(check.key, {})
         if check.float_id not in seen or check.outcome == CONTRADICTED:  # a float counts once
             seen[check.float_id] = check
-    findings = [
-        _finding(mission, by_float)
-        for by_float in per_float.values()
-        if any(c.outcome == CONTRADICTED for c in by_float.values())
-    ]
+    findings = []
+    for by_float in per_float.values():
+        pooled = pooled_check(list(by_float.values()))
+        if any(c.outcome == CONTRADICTED for c in by_float.values()) or (pooled and pooled.outcome == CONTRADICTED):
+            findings.append(_finding(mission, by_float, pooled))
     return sorted(findings, key=lambda f: (PurePath(f.file).name, f.line is None, f.line or 0, f.id, f.field))
 
 
-def _finding(mission: str, by_float: Mapping[str, Check]) -> Finding:
-    """The finding of one table value from each float's check of it."""
+@dataclass(frozen=True)
+class Pooled:
+    """A source's value on every float's arrivals together (module docstring)."""
+
+    value: float
+    sd: float
+    outcome: str
+
+
+def pooled_check(checks: Sequence[Check]) -> Pooled | None:
+    """The inverse-variance pool of the floats' values of one source's offset or drift (None
+    for other fields, or without a float whose check has a value, an sd and its settings)."""
+    usable = [c for c in checks if c.of_source and c.field in POOLED_TOLERANCE and _poolable(c)]
+    if not usable or not isinstance(usable[0].given, float):
+        return None
+    pairs = [(float(c.supported), 1.0 / float(c.sd) ** 2) for c in usable]  # type: ignore[arg-type]  # _poolable
+    weight = sum(w for _, w in pairs)
+    value, sd = sum(x * w for x, w in pairs) / weight, weight**-0.5
+    tolerance, z = float(usable[0].tolerance or 0.0), float(usable[0].z_score or 0.0)
+    digits = 3 if usable[0].unit == "s" else 5
+    return Pooled(round(value, digits), round(sd, digits), outcome_of(value - usable[0].given, sd, tolerance, z))
+
+
+def _poolable(check: Check) -> bool:
+    return (
+        isinstance(check.supported, float)
+        and check.sd is not None
+        and check.sd > 0
+        and check.tolerance is not None
+        and check.z_score is not None
+    )
+
+
+def _finding(mission: str, by_float: Mapping[str, Check], pooled: Pooled | None = None) -> Finding:
+    """The finding of one table value from each float's check of it (and their pool)."""
     against = [by_float[f] for f in sorted(by_float) if by_float[f].outcome == CONTRADICTED]
-    first = against[0]
+    first = against[0] if against else by_float[sorted(by_float)[0]]
     return Finding(
         mission=mission,
         file=first.file,
@@ -234,13 +307,14 @@ def _finding(mission: str, by_float: Mapping[str, Check]) -> Finding:
         field=first.field,
         unit=first.unit,
         given=first.given,
-        supported=median_value([c.supported for c in against]),
+        supported=median_value([c.supported for c in against]) if against or pooled is None else pooled.value,
         contradicting=tuple(c.float_id for c in against),
         n_checked=len(by_float),
         n_consistent=sum(c.outcome == "consistent" for c in by_float.values()),
         of_source=first.of_source,
         given_lat_lon=first.given_lat_lon,
         supported_lat_lon=_median_lat_lon([c.supported_lat_lon for c in against]),
+        pooled=pooled,
     )
 
 
@@ -298,7 +372,7 @@ def batch_findings(outcomes: Sequence[FloatOutcome]) -> tuple[list[Finding], lis
     checks: dict[str, list[Check]] = {}
     unreadable = []
     for outcome in outcomes:
-        if not _is_current(outcome):
+        if not is_current(outcome):
             continue
         path = Path(outcome.output) / "run.json"
         read = read_run_checks(path, outcome.float_id)
@@ -310,7 +384,7 @@ def batch_findings(outcomes: Sequence[FloatOutcome]) -> tuple[list[Finding], lis
     return findings, unreadable
 
 
-def _is_current(outcome: FloatOutcome) -> bool:
+def is_current(outcome: FloatOutcome) -> bool:
     """Whether the float's output directory holds outputs of its current inputs."""
     if outcome.status == FAILED or not outcome.output:
         return False

@@ -15,9 +15,11 @@ x's marginal information too):
 A value is *contradicted* when the arrivals' correction lies farther from zero than
 `[checks] z_score` of its standard deviations, z sqrt(C_d) (the arrivals are sure the value
 is not the table's), and than the value's tolerance (the difference matters; the prior's own
-width, which lets calibration refine a value, is not an error); *undetermined* when the
-arrivals' sd exceeds the tolerance (or C_d^-1 is not positive: the arrivals alone do not fix
-it); *consistent* otherwise. A value the table does not give (an empty clock_offset_end_s)
+width, which lets calibration refine a value, is not an error); *consistent* when the arrivals
+place it within the tolerance, |correction| <= tolerance + 2 sd with sd <= tolerance (their
+95% interval reaches the tolerance band); *undetermined* otherwise: the arrivals' sd exceeds
+the tolerance (or C_d^-1 is not positive: the arrivals alone do not fix it), or they lean
+away from the value without being sure of it. A value the table does not give (an empty clock_offset_end_s)
 is *estimated*, or undetermined when its sd exceeds the tolerance (then with a warning: the
 track rests on a value the data cannot check). What calibration does with a contradicted
 value (tracks with the arrivals' value) is `calibrate.release`'s.
@@ -60,9 +62,15 @@ class MetadataCheck:
     # above are then 0 and the distance between them (km).
     given_lat_lon: tuple[float, float] | None = None
     supported_lat_lon: tuple[float, float] | None = None
+    # Other fields of the same row that would explain the arrivals as well (a source's
+    # position, where these arrivals cannot tell it from its offset or drift).
+    alternatives: tuple[str, ...] = ()
 
     def as_json(self) -> dict[str, Any]:
-        return {k: v for k, v in asdict(self).items() if v is not None or k in ("given", "supported", "sd", "line")}
+        entry = {k: v for k, v in asdict(self).items() if v is not None or k in ("given", "supported", "sd", "line")}
+        if not self.alternatives:
+            del entry["alternatives"]
+        return entry
 
     def warning(self) -> str | None:
         """The one-line warning of a contradicted value or of one the table leaves empty (None
@@ -85,8 +93,10 @@ class MetadataCheck:
         else:
             given = f"{_number(self.given)} {self.unit}"
             supported = f"{_number(self.supported)} {self.unit} (sd {_number(self.sd)} {self.unit})"
+        alternatives = " or ".join(f"'{a}'" for a in self.alternatives)
+        unsure = f" (or its {alternatives} is wrong: these arrivals cannot tell which)" if alternatives else ""
         return (
-            f"{where}: field '{self.field}' of {self.id}: given {given}; the arrivals support {supported}; "
+            f"{where}: field '{self.field}' of {self.id}: given {given}; the arrivals support {supported}{unsure}; "
             "tracked with the arrivals' value"
         )
 
@@ -124,7 +134,9 @@ def outcome_of(correction: float, sd_d: float, tolerance: float, z: float) -> st
     """Contradicted, undetermined or consistent (module docstring)."""
     if abs(correction) > max(z * sd_d, tolerance):
         return CONTRADICTED
-    return UNDETERMINED if sd_d > tolerance else CONSISTENT
+    if sd_d > tolerance or abs(correction) > tolerance + 2.0 * sd_d:
+        return UNDETERMINED
+    return CONSISTENT
 
 
 @dataclass(frozen=True)
@@ -185,8 +197,23 @@ def timing_checks(
     columns += [*problem.per_beacon(0), *problem.per_beacon(1)]
     post = _Posterior.of(problem, fit.unknowns, fit, priors, np.array(sorted(set(columns))))
     found = _fix_checks(problem, post, info, checks) + _clock_checks(problem, post, info, checks)
-    found += _source_checks(problem, post, priors, heard, mid_days, beacons, checks)
-    return found + position_checks(problem, fit, priors, heard, beacons, checks)
+    timing = _source_checks(problem, post, priors, heard, mid_days, beacons, checks)
+    positions = position_checks(problem, fit, priors, heard, beacons, checks)
+    return found + with_position_alternative(timing, positions)
+
+
+def with_position_alternative(timing: list[MetadataCheck], positions: list[MetadataCheck]) -> list[MetadataCheck]:
+    """`timing` and `positions`, a contradicted offset or drift of a source whose position
+    the arrivals cannot check naming the position as the other explanation: a source
+    displaced by d moves its arrivals by -u.d / c, u the unit vector towards the float,
+    which is a constant (an offset) while the float's bearing holds and a trend (a drift)
+    while it turns steadily."""
+    unchecked = {p.id for p in positions if p.outcome == UNDETERMINED}
+    timing = [
+        dataclasses.replace(c, alternatives=("position",)) if c.outcome == CONTRADICTED and c.id in unchecked else c
+        for c in timing
+    ]
+    return timing + positions
 
 
 def _clock_index(problem: kalman.Problem) -> list[int]:

@@ -311,14 +311,16 @@ def _contradicted(checks: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def names(check: dict[str, Any], fault: InjectedFault) -> bool:
-    """Whether a metadata_checks entry names `fault` (same file, id and field; contradicted,
-    or for a value left empty, reported as estimated or undetermined with no value given)."""
+    """Whether a metadata_checks entry names `fault` (same file, id and field, or a field of
+    the same row whose entry names the fault's as its alternative; contradicted, or for a
+    value left empty, reported as estimated or undetermined with no value given)."""
     missing = fault.written is None and check.get("given") is None
+    fields = [check.get("field"), *check.get("alternatives", ())]
     return (
         (check.get("outcome") == "contradicted" or (missing and check.get("outcome") in ("estimated", "undetermined")))
         and Path(str(check.get("file"))).name == fault.file
         and str(check.get("id")) == fault.id
-        and check.get("field") in naming_fields(fault)
+        and any(field in naming_fields(fault) for field in fields)
     )
 
 
