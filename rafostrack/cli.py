@@ -1,4 +1,4 @@
-"""Command-line interface: `rafostrack track`, `legs`, `batch`, `simulate` and `config`.
+"""Command-line interface: `rafostrack track`, `legs`, `batch`, `summary`, `simulate` and `config`.
 
 Thin: parse options, call the pipeline, report. A user mistake (`InputError`) prints one
 line `rafostrack: error: ...` and exits with code 2; `--debug` shows the traceback.
@@ -266,7 +266,7 @@ def float_inputs(command: Callable[..., Any]) -> Callable[..., Any]:
     default="parquet",
     show_default=True,
     metavar="LIST",
-    help="Output formats, comma-separated: parquet, csv, netcdf (CF trajectory), rfc (ARTOA track text).",
+    help="Output formats, comma-separated: parquet, csv, netcdf (CF track.nc and labels.nc), rfc (ARTOA track text).",
 )
 @debug_option
 @_report_errors
@@ -430,6 +430,21 @@ def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots,
     )
     click.echo(result.summary)
     sys.exit(result.exit_code)
+
+
+@main.command()
+@click.argument("out_root", metavar="OUT", type=click.Path(path_type=Path))
+@debug_option
+@_report_errors
+def summary(out_root) -> None:
+    """Write the mission overview of an existing output tree OUT (the output root of `batch`,
+    or the --out folder of `track`): overview.html, overview.csv and overview.png in OUT,
+    the floats that need a look first. Exit code 2 when OUT holds no tracked float."""
+    from .batch.overview import OK, summarise_tree, write_overview
+
+    overview = summarise_tree(out_root)
+    html_path = write_overview(overview)[0]
+    click.echo(f"{len(overview.rows)} floats, {len(overview.rows) - overview.count(OK)} need a look -> {html_path}")
 
 
 @main.command("config")

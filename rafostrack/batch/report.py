@@ -14,11 +14,15 @@ Guarantees:
 - The metadata findings (`findings.py`): one line per table value the arrivals contradict,
   printed at the end, and `metadata-findings.csv` (columns `FINDINGS_COLUMNS`; a header
   only when there is none), which `run.py` writes atomically beside `batch-summary.csv`.
+- The mission overview (`overview.py`): `overview.html`, `overview.csv` and `overview.png`
+  written atomically in OUT, and one line naming the floats that need a look. A failure to
+  write it is logged (with its traceback in batch.log) and does not fail the batch.
 """
 
 from __future__ import annotations
 
 import time
+import traceback
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -28,6 +32,7 @@ from tqdm import tqdm
 
 from ..io.writers import csv_text
 from .findings import FINDINGS_NAME, batch_findings, findings_csv
+from .overview import OK, OVERVIEW_HTML, build_overview, write_overview
 from .plan import FAILED, PROCESSED, SKIPPED, FloatOutcome
 
 SUMMARY_NAME = "batch-summary.csv"
@@ -123,6 +128,7 @@ def summary_table(outcomes: Sequence[FloatOutcome], elapsed_s: float, out: Path)
     )
     lines.append(
         f"summary: {Path(out) / SUMMARY_NAME}  log: {Path(out) / LOG_NAME}  findings: {Path(out) / FINDINGS_NAME}"
+        f"  overview: {Path(out) / OVERVIEW_HTML}"
     )
     return "\n".join(lines)
 
@@ -146,3 +152,27 @@ def report_findings(reporter: Reporter, outcomes: Sequence[FloatOutcome], out: P
     for finding in findings:
         reporter.log(finding.message())
     return findings_csv(findings)
+
+
+_SHOWN_NEEDING = 5  # float names printed in the overview's line (all are in overview.html)
+
+
+def report_overview(reporter: Reporter, outcomes: Sequence[FloatOutcome], out: Path, plots: bool = True) -> None:
+    """Write the mission overview of the batch's floats in OUT (`overview.write_overview`; the
+    map only with `plots`) and log one line naming the floats that need a look (on the
+    console when there are any)."""
+    try:
+        overview = build_overview(Path(out), outcomes)
+        write_overview(overview, plots=plots)
+    except Exception as exc:  # the floats are done; a broken overview must not hide their summary
+        reporter.log(f"overview: cannot be written: {type(exc).__name__}: {' '.join(str(exc).splitlines())}")
+        reporter.lines.append(traceback.format_exc().rstrip())
+        return
+    needing = [r for r in overview.rows if r.look != OK]
+    path = Path(out) / OVERVIEW_HTML
+    if not needing:
+        reporter.log(f"overview: no float needs a look ({path})", console=False)
+        return
+    names = ", ".join(f"{r.mission}/{r.float_id}" if r.mission else r.float_id for r in needing[:_SHOWN_NEEDING])
+    more = ", ..." if len(needing) > _SHOWN_NEEDING else ""
+    reporter.log(f"overview: {len(needing)} of {len(overview.rows)} floats need a look ({names}{more}): {path}")

@@ -7,8 +7,8 @@ Guarantees:
   anything is written in OUT.
 - Everything that writes in OUT happens while holding OUT's lock (`lock.py`): first the
   temporary directories and files a killed run left in OUT are removed, then the floats are
-  planned and run, then `batch-summary.csv`, `metadata-findings.csv` and `batch.log` are
-  written atomically.
+  planned and run, then `batch-summary.csv`, `metadata-findings.csv`, the mission overview
+  (`overview.html`, `overview.csv`, `overview.png`) and `batch.log` are written atomically.
 - The result's exit code is 0 when no float failed, 1 when some did.
 """
 
@@ -33,7 +33,16 @@ from .discover import Mission, discover
 from .lock import BatchLock
 from .plan import FAILED, SKIPPED, FloatOutcome, plan
 from .pool import dask_client, local_workers, run_dask, run_local
-from .report import FINDINGS_NAME, LOG_NAME, SUMMARY_NAME, Reporter, report_findings, summary_csv, summary_table
+from .report import (
+    FINDINGS_NAME,
+    LOG_NAME,
+    SUMMARY_NAME,
+    Reporter,
+    report_findings,
+    report_overview,
+    summary_csv,
+    summary_table,
+)
 
 _STALE_FILE = re.compile(r"^\..+\.tmp$")  # atomic_path's temporary files
 
@@ -178,6 +187,7 @@ def _run_locked(
     reporter.lines.extend(table.splitlines())
     write_text_atomic(out / SUMMARY_NAME, summary_csv(outcomes))
     write_text_atomic(out / FINDINGS_NAME, findings)
+    report_overview(reporter, outcomes, out, plots=options.plots)
     write_text_atomic(out / LOG_NAME, "\n".join(reporter.lines) + "\n")
     return outcomes, table
 

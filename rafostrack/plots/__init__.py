@@ -1,7 +1,8 @@
 """Diagnostic plots of one float's tracking result: map, labelled arrivals, uncertainty.
 
-One module per figure (`track_map`, `arrivals`, `uncertainty`); `base` holds what they
-share (atomic PNG writing, colours, date axes), which the experiments use too.
+One module per figure (`track_map`, `arrivals`, `uncertainty`; `mission_map`, every float
+of a batch on one map, for the mission overview); `base` holds what they share (atomic PNG
+writing, colours, date axes), which the experiments use too.
 """
 
 from __future__ import annotations
