@@ -86,7 +86,14 @@ from rafostrack.sim.evaluate import (
     label_scores,
     position_errors_km,
 )
-from rafostrack.sim.faults import FAULT_KINDS, check_kinds, false_alarms, read_faults, unnamed_faults
+from rafostrack.sim.faults import (
+    FAULT_KINDS,
+    InjectedFault,
+    check_kinds,
+    false_alarms,
+    read_faults,
+    unnamed_faults,
+)
 from rafostrack.sim.stress import (
     DAY_NS,
     FAULT_STREAM,
@@ -541,12 +548,19 @@ def _print_seed(seed: int | None, runs: pd.DataFrame, labels: pd.DataFrame) -> t
     return failing, _seed_report(seed, runs[cols], notes, reliability)
 
 
+def always_failing(failing_with: list[list[Target]]) -> list[tuple[str, list[str]]]:
+    """Per target, the floats that fail it with every filter seed (`failing_with`: the
+    targets of each seed's run, in `targets` order)."""
+    return [
+        (target.name, sorted(set.intersection(*(set(per_seed[k].failing) for per_seed in failing_with))))
+        for k, target in enumerate(failing_with[0])
+    ]
+
+
 def _print_spread(out_root: Path, seeds: list[int | None], failing_with: list, floats: list[str]) -> str:
     """Print the floats failing with every seed and the seed spread; the report's text."""
     print(f"\nfailing with every seed ({', '.join(map(str, seeds))}):")
-    for k, target in enumerate(failing_with[0]):
-        name = target.name
-        always = sorted(set.intersection(*(set(per_seed[k].failing) for per_seed in failing_with)))
+    for name, always in always_failing(failing_with):
         print(f"  {name}: {len(always)}" + (f" ({', '.join(always)})" if always else ""))
     spread = seed_spread(out_root, [int(k) for k in seeds if k is not None], floats)
     ratio = spread["spread_km"] / spread["median_sd_km"]
@@ -588,6 +602,12 @@ def _alarm_text(checks: list[dict[str, Any]]) -> str:
     return "; ".join(f"{Path(str(c['file'])).name} {c['id']} {c['field']}" for c in checks)
 
 
+def float_faults(float_file: Path) -> list[InjectedFault]:
+    """The faults injected into a float's mission that are its own or its sources'."""
+    faults = read_faults(float_file.parent / "truth" / "faults.json")
+    return [f for f in faults if f.file == "beacons.csv" or f.id == float_file.stem]
+
+
 def score_faulted(task: tuple[Path, Path, tuple[Path, ...]]) -> dict[str, Any]:
     """Track one float of a faulted mission by default; its figures, the faults (its own and
     the sources') its metadata checks name, and their false alarms."""
@@ -595,8 +615,7 @@ def score_faulted(task: tuple[Path, Path, tuple[Path, ...]]) -> dict[str, Any]:
     truth, events = read_truth(float_file)
     inputs = TrackInputs(float_file, config_files=config_files, overrides={"filter": {}})
     track = track_float(inputs, out_root, plots=False).output.track
-    mine = [f for f in read_faults(float_file.parent / "truth" / "faults.json") if f.file == "beacons.csv"
-            or f.id == float_file.stem]  # fmt: skip
+    mine = float_faults(float_file)
     checks = metadata_checks(out_root / float_file.stem / "run.json")
     unnamed, alarms = unnamed_faults(mine, checks), false_alarms(mine, checks)
     return {
@@ -651,8 +670,7 @@ def with_mission_findings(rows: list[dict[str, Any]], out_root: Path, files: lis
     pooled, by_stem = pooled_alarms(out_root, files), {f.stem: f for f in files}
     for row in rows:
         float_file = by_stem[row["float"]]
-        mine = [f for f in read_faults(float_file.parent / "truth" / "faults.json") if f.file == "beacons.csv"
-                or f.id == float_file.stem]  # fmt: skip
+        mine = float_faults(float_file)
         own = metadata_checks(out_root / float_file.stem / "run.json")
         row["named_mission"] = len(mine) - len(unnamed_faults(mine, own + pooled[row["mission"]]))
         row["false_alarms_mission"] = row["false_alarms"] + len(false_alarms(mine, pooled[row["mission"]]))
@@ -808,9 +826,7 @@ def _seed_report(seed: int | None, runs: pd.DataFrame, notes: list[str], reliabi
 def _spread_report(seeds: list[int | None], failing_with: list, spread: pd.DataFrame) -> str:
     """The report's text over several filter seeds: the floats failing with every seed, the seed spread."""
     lines = [f"**Failing with every seed** ({', '.join(map(str, seeds))}):", ""]
-    for k, target in enumerate(failing_with[0]):
-        name = target.name
-        always = sorted(set.intersection(*(set(per_seed[k].failing) for per_seed in failing_with)))
+    for name, always in always_failing(failing_with):
         lines.append(f"- {name}: {len(always)}" + (f" ({', '.join(always)})" if always else ""))
     lines += ["", "**Seed spread** (RMS distance of each seed's track from their mean, km) and the median sd_km:", ""]
     lines.append(markdown_table(spread.rename_axis("float").reset_index(), {}))

@@ -296,7 +296,7 @@ def test_the_csv_and_the_printed_lines(tmp_path):
     )
     stream = io.StringIO()
     reporter = b.Reporter(stream, tty=False)
-    text = report_findings(reporter, outcomes, tmp_path)
+    text = findings_csv(report_findings(reporter, outcomes, tmp_path))
     rows = list(csv.DictReader(io.StringIO(text)))
     assert tuple(rows[0]) == FINDINGS_COLUMNS
     assert rows == [

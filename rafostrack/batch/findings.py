@@ -31,6 +31,7 @@ redone: the finding says which value to correct in the table before rerunning.
 from __future__ import annotations
 
 import json
+import math
 import statistics
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -155,12 +156,9 @@ class Finding:
         """The line printed at the end of the batch, e.g. `mission dimes: beacons.csv line 5:
         field 'offset_s' of source B3: given 120.0 s; the arrivals support 90.2 s on 7 of 9
         floats that hear it (float701, float702, ...)`."""
-        where = PurePath(self.file).name + (f" line {self.line}" if self.line is not None else "")
+        where = table_place(self.file, self.line)
         what = f"field '{self.field}' of {'source ' if self.of_source else ''}{self.id}"
-        given, supported = format_value(self.given, self.unit), format_value(self.supported, self.unit)
-        if self.given_lat_lon is not None and self.supported_lat_lon is not None:
-            (lat, lon), (lat_d, lon_d) = self.given_lat_lon, self.supported_lat_lon
-            given, supported = f"{lat:.3f}, {lon:.3f}", f"{lat_d:.3f}, {lon_d:.3f} ({supported} away)"
+        given, supported = value_texts(self)
         if not self.contradicting and self.pooled is not None:
             pooled = f"{format_value(self.pooled.value, self.unit)} (sd {format_value(self.pooled.sd, self.unit)})"
             return (
@@ -173,6 +171,22 @@ class Finding:
         shown = ", ".join(self.contradicting[:_SHOWN_FLOATS])
         more = ", ..." if len(self.contradicting) > _SHOWN_FLOATS else ""
         return f"{text} on {len(self.contradicting)} of {self.n_checked} floats that hear it ({shown}{more})"
+
+
+def table_place(file: str, line: int | None) -> str:
+    """Where a value stands in its table: `beacons.csv line 4` (the file's name only)."""
+    return PurePath(file).name + (f" line {line}" if line is not None else "")
+
+
+def value_texts(value: Check | Finding) -> tuple[str, str]:
+    """The given and the supported value of a check or finding as a message shows them
+    (`format_value`); a position (a fix, a source) as latitude, longitude, the supported
+    one with its distance from the given."""
+    given, supported = format_value(value.given, value.unit), format_value(value.supported, value.unit)
+    if value.given_lat_lon is not None and value.supported_lat_lon is not None:
+        (lat, lon), (lat_d, lon_d) = value.given_lat_lon, value.supported_lat_lon
+        given, supported = f"{lat:.3f}, {lon:.3f}", f"{lat_d:.3f}, {lon_d:.3f} ({supported} away)"
+    return given, supported
 
 
 def format_value(value: Value, unit: str) -> str:
@@ -214,17 +228,19 @@ def parse_checks(run: Mapping[str, Any], float_id: str) -> list[Check]:
                 outcome=str(entry.get("outcome") or "missing"),
                 given_lat_lon=_lat_lon(entry.get("given_lat_lon")),
                 supported_lat_lon=_lat_lon(entry.get("supported_lat_lon")),
-                sd=_number(entry.get("sd")),
-                tolerance=_number(settings.get(POOLED_TOLERANCE.get(str(entry["field"]), ""))),
-                z_score=_number(settings.get("z_score")),
+                sd=number(entry.get("sd")),
+                tolerance=number(settings.get(POOLED_TOLERANCE.get(str(entry["field"]), ""))),
+                z_score=number(settings.get("z_score")),
             )
         )
     return checks
 
 
-def _number(value: Any) -> float | None:
-    value = _value(value)
-    return value if isinstance(value, float) else None
+def number(value: Any) -> float | None:
+    """A JSON value as a finite float, None for anything else (missing, text, bool, NaN)."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return None
+    return float(value)
 
 
 def _value(value: Any) -> Value:
@@ -274,7 +290,7 @@ class Pooled:
 def pooled_check(checks: Sequence[Check]) -> Pooled | None:
     """The inverse-variance pool of the floats' values of one source's offset or drift (None
     for other fields, or without a float whose check has a value, an sd and its settings)."""
-    usable = [c for c in checks if c.of_source and c.field in POOLED_TOLERANCE and _poolable(c)]
+    usable = [c for c in checks if c.of_source and _poolable(c)]
     if not usable or not isinstance(usable[0].given, float):
         return None
     pairs = [(float(c.supported), 1.0 / float(c.sd) ** 2) for c in usable]  # type: ignore[arg-type]  # _poolable
@@ -286,6 +302,8 @@ def pooled_check(checks: Sequence[Check]) -> Pooled | None:
 
 
 def _poolable(check: Check) -> bool:
+    """A value, an sd and the settings to judge a pool by (`parse_checks` sets a tolerance
+    only for the pooled fields, `POOLED_TOLERANCE`)."""
     return (
         isinstance(check.supported, float)
         and check.sd is not None

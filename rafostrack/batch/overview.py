@@ -49,7 +49,7 @@ from ..calibrate.metadata_checks import CONTRADICTED
 from ..errors import InputError
 from ..io import atomic
 from ..plots.mission_map import NEEDS_LOOK, OK, FloatPath, plot_mission_map
-from .findings import Check, batch_findings, format_value, is_current, parse_checks
+from .findings import Check, Finding, batch_findings, is_current, number, parse_checks, table_place, value_texts
 from .plan import FAILED, PROCESSED, FloatOutcome
 
 OVERVIEW_HTML = "overview.html"
@@ -291,7 +291,7 @@ def run_values(run: Mapping[str, Any], float_id: str) -> dict[str, Any]:
         sound_speed_calibrated=speed_fitted,
         toa_sigma_s=sigma,
         toa_sigma_calibrated=sigma_fitted,
-        toa_residual_rms_s=_number(calibration.get("residual_rms_s")),
+        toa_residual_rms_s=number(calibration.get("residual_rms_s")),
         clock_drift_s=clock_drift_s(run, float_id),
         warning_kinds=kinds,
         contradicted=tuple(contradiction(c) for c in contradicted),
@@ -305,17 +305,11 @@ def _mapping(value: Any) -> Mapping[str, Any]:
 
 def _used(fitted: Mapping[str, Any], model: Mapping[str, Any], key: str) -> tuple[float | None, bool | None]:
     """The value the last pass used for `[model] key`: the calibration's, else the configured."""
-    value = _number(fitted.get(f"[model] {key}"))
+    value = number(fitted.get(f"[model] {key}"))
     if value is not None:
         return value, True
-    value = _number(model.get(key))
+    value = number(model.get(key))
     return value, (False if value is not None else None)
-
-
-def _number(value: Any) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-        return None
-    return float(value)
 
 
 def clock_drift_s(run: Mapping[str, Any], float_id: str) -> float | None:
@@ -325,7 +319,7 @@ def clock_drift_s(run: Mapping[str, Any], float_id: str) -> float | None:
     entries = run.get("metadata_checks")
     for entry in entries if isinstance(entries, list) else []:
         if isinstance(entry, Mapping) and str(entry.get("id")) == float_id:
-            value = _number(entry.get("used"))
+            value = number(entry.get("used"))
             if value is not None:
                 used[str(entry.get("field"))] = value
     if "clock_offset_start_s" not in used or "clock_offset_end_s" not in used:
@@ -336,12 +330,8 @@ def clock_drift_s(run: Mapping[str, Any], float_id: str) -> float | None:
 def contradiction(check: Check) -> tuple[str, str]:
     """What a contradicted check names and what it says: ('beacons.csv line 4: offset_s of
     US1-3', 'given 1530.0 s, arrivals 1497.2 s'); a position as latitude, longitude."""
-    where = PurePath(check.file).name + (f" line {check.line}" if check.line is not None else "")
-    given, supported = format_value(check.given, check.unit), format_value(check.supported, check.unit)
-    if check.given_lat_lon is not None and check.supported_lat_lon is not None:
-        (lat, lon), (lat_d, lon_d) = check.given_lat_lon, check.supported_lat_lon
-        given, supported = f"{lat:.3f}, {lon:.3f}", f"{lat_d:.3f}, {lon_d:.3f} ({supported} away)"
-    return f"{where}: {check.field} of {check.id}", f"given {given}, arrivals {supported}"
+    given, supported = value_texts(check)
+    return f"{table_place(check.file, check.line)}: {check.field} of {check.id}", f"given {given}, arrivals {supported}"
 
 
 def summarise_float(mission: str, float_id: str, output: Path) -> FloatRow:
@@ -379,9 +369,15 @@ def judged(rows: Sequence[FloatRow], rules: LookRules) -> list[FloatRow]:
     return sorted(out, key=lambda r: (LOOK_ORDER[r.look], -len(r.reasons), r.mission, r.float_id))
 
 
-def build_overview(out: Path, outcomes: Sequence[FloatOutcome], rules: LookRules | None = None) -> Overview:
+def build_overview(
+    out: Path,
+    outcomes: Sequence[FloatOutcome],
+    rules: LookRules | None = None,
+    findings: Sequence[Finding] | None = None,
+) -> Overview:
     """The overview of a batch's floats: the current outputs of each float processed or
-    skipped as unchanged, each failed float with its reason; the others counted."""
+    skipped as unchanged, each failed float with its reason; the others counted. `findings`:
+    the floats' metadata findings, when the batch has them already (else read here)."""
     rows = []
     not_tracked = 0
     for outcome in outcomes:
@@ -392,8 +388,9 @@ def build_overview(out: Path, outcomes: Sequence[FloatOutcome], rules: LookRules
         else:
             not_tracked += 1
     rules = rules or LookRules()
-    findings = tuple(f.message().removeprefix("mission : ") for f in batch_findings(outcomes)[0])
-    return Overview(Path(out), judged(rows, rules), not_tracked, rules, findings)
+    found = batch_findings(outcomes)[0] if findings is None else findings
+    messages = tuple(f.message().removeprefix("mission : ") for f in found)
+    return Overview(Path(out), judged(rows, rules), not_tracked, rules, messages)
 
 
 # ------------------------------------------------------------------- an existing output tree

@@ -31,7 +31,7 @@ from typing import TextIO
 from tqdm import tqdm
 
 from ..io.writers import csv_text
-from .findings import FINDINGS_NAME, batch_findings, findings_csv
+from .findings import FINDINGS_NAME, Finding, batch_findings
 from .overview import OK, OVERVIEW_HTML, build_overview, write_overview
 from .plan import FAILED, PROCESSED, SKIPPED, FloatOutcome
 
@@ -138,9 +138,9 @@ def summary_csv(outcomes: Sequence[FloatOutcome]) -> str:
     return csv_text(SUMMARY_COLUMNS, (outcome.row() for outcome in outcomes))
 
 
-def report_findings(reporter: Reporter, outcomes: Sequence[FloatOutcome], out: Path) -> str:
+def report_findings(reporter: Reporter, outcomes: Sequence[FloatOutcome], out: Path) -> list[Finding]:
     """Print the metadata findings of the floats' run.json files, one line each (stderr and
-    batch.log), and return the text of metadata-findings.csv."""
+    batch.log), and return them (`findings_csv` is the text of metadata-findings.csv)."""
     findings, unreadable = batch_findings(outcomes)
     for line in unreadable:
         reporter.log(line)
@@ -151,18 +151,24 @@ def report_findings(reporter: Reporter, outcomes: Sequence[FloatOutcome], out: P
         reporter.log(f"metadata findings: {len(findings)} table value(s) contradicted by the arrivals ({path}):")
     for finding in findings:
         reporter.log(finding.message())
-    return findings_csv(findings)
+    return findings
 
 
 _SHOWN_NEEDING = 5  # float names printed in the overview's line (all are in overview.html)
 
 
-def report_overview(reporter: Reporter, outcomes: Sequence[FloatOutcome], out: Path, plots: bool = True) -> None:
-    """Write the mission overview of the batch's floats in OUT (`overview.write_overview`; the
-    map only with `plots`) and log one line naming the floats that need a look (on the
-    console when there are any)."""
+def report_overview(
+    reporter: Reporter,
+    outcomes: Sequence[FloatOutcome],
+    out: Path,
+    findings: Sequence[Finding],
+    plots: bool = True,
+) -> None:
+    """Write the mission overview of the batch's floats and their metadata `findings` in OUT
+    (`overview.write_overview`; the map only with `plots`) and log one line naming the
+    floats that need a look (on the console when there are any)."""
     try:
-        overview = build_overview(Path(out), outcomes)
+        overview = build_overview(Path(out), outcomes, findings=findings)
         write_overview(overview, plots=plots)
     except Exception as exc:  # the floats are done; a broken overview must not hide their summary
         reporter.log(f"overview: cannot be written: {type(exc).__name__}: {' '.join(str(exc).splitlines())}")

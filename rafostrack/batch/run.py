@@ -30,6 +30,7 @@ from ..config import load_config
 from ..errors import InputError
 from ..io.outdir import SIBLING
 from .discover import Mission, discover
+from .findings import findings_csv
 from .lock import BatchLock
 from .plan import FAILED, SKIPPED, FloatOutcome, plan
 from .pool import dask_client, local_workers, run_dask, run_local
@@ -186,8 +187,8 @@ def _run_locked(
     table = summary_table(outcomes, time.monotonic() - started, out)
     reporter.lines.extend(table.splitlines())
     write_text_atomic(out / SUMMARY_NAME, summary_csv(outcomes))
-    write_text_atomic(out / FINDINGS_NAME, findings)
-    report_overview(reporter, outcomes, out, plots=options.plots)
+    write_text_atomic(out / FINDINGS_NAME, findings_csv(findings))
+    report_overview(reporter, outcomes, out, findings, plots=options.plots)
     write_text_atomic(out / LOG_NAME, "\n".join(reporter.lines) + "\n")
     return outcomes, table
 
