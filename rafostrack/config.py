@@ -111,6 +111,7 @@ class CalibrateConfig:
 
     enabled: bool = setting()
     first_pass_toa_sigma_s: float = setting("> 0", _positive)
+    first_pass_clock_walk_s_per_sqrt_day: float = setting(">= 0", lambda v: v >= 0)
     iterations: int = setting("between 1 and 5", lambda v: 1 <= v <= 5)
     max_particles: int = setting("between 2 and 10000000", lambda v: 2 <= v <= 10_000_000)
     min_clock_rate_sd_s_per_day: float = setting(

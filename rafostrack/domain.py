@@ -154,11 +154,14 @@ class PositionFix:
 @dataclass(frozen=True)
 class Particles:
     """Particle states: position (degrees) and, for velocity-persistent motion models, the
-    east/north velocity (km/day), shape (P, 2); None for position-only models."""
+    east/north velocity (km/day), shape (P, 2); None for position-only models. `clock_s`,
+    where the float clock is part of the state (`motion.clock.ClockWalk`), is each
+    particle's correction (s) to the table's float clock; None otherwise."""
 
     lat: NDArray[np.float64]
     lon: NDArray[np.float64]
     velocity_km_per_day: NDArray[np.float64] | None = None
+    clock_s: NDArray[np.float64] | None = None
 
     def __len__(self) -> int:
         return len(self.lat)
@@ -166,29 +169,47 @@ class Particles:
     def take(self, index: NDArray[np.intp]) -> Particles:
         """The particles at `index` (e.g. resampled ancestors), copied."""
         vel = None if self.velocity_km_per_day is None else self.velocity_km_per_day[index]
-        return Particles(self.lat[index], self.lon[index], vel)
+        clock = None if self.clock_s is None else self.clock_s[index]
+        return Particles(self.lat[index], self.lon[index], vel, clock)
 
     def reversed(self) -> Particles:
         """The same positions with velocities negated (for a filter run backwards in time)."""
         vel = None if self.velocity_km_per_day is None else -self.velocity_km_per_day
-        return Particles(self.lat, self.lon, vel)
+        return Particles(self.lat, self.lon, vel, self.clock_s)
 
     def replace_at(self, index: NDArray[np.intp], other: Particles) -> Particles:
-        """A copy with the particles at `index` replaced by `other` (same length as `index`)."""
+        """A copy with the particles at `index` replaced by `other` (same length as `index`):
+        the velocity where both have one; the clock where both have one, else `self`'s (a
+        data-driven proposal redraws the position and carries the motion's clock over)."""
         lat, lon = self.lat.copy(), self.lon.copy()
         lat[index], lon[index] = other.lat, other.lon
         vel = None
-        if self.velocity_km_per_day is not None and other.velocity_km_per_day is not None:
-            vel = self.velocity_km_per_day.copy()
-            vel[index] = other.velocity_km_per_day
-        return Particles(lat, lon, vel)
+        if other.velocity_km_per_day is not None:
+            vel = _replaced(self.velocity_km_per_day, index, other.velocity_km_per_day)
+        return Particles(lat, lon, vel, _replaced(self.clock_s, index, other.clock_s))
+
+    def with_clock(self, clock_s: NDArray[np.float64] | None) -> Particles:
+        """The same particles with the float clock corrections `clock_s` (None: none)."""
+        return Particles(self.lat, self.lon, self.velocity_km_per_day, clock_s)
 
     @staticmethod
     def concat(parts: list[Particles]) -> Particles:
         vel = None
         if all(p.velocity_km_per_day is not None for p in parts):
             vel = np.concatenate([p.velocity_km_per_day for p in parts])  # type: ignore[misc]
-        return Particles(np.concatenate([p.lat for p in parts]), np.concatenate([p.lon for p in parts]), vel)
+        clock = None
+        if all(p.clock_s is not None for p in parts):
+            clock = np.concatenate([p.clock_s for p in parts])  # type: ignore[misc]
+        return Particles(np.concatenate([p.lat for p in parts]), np.concatenate([p.lon for p in parts]), vel, clock)
+
+
+def _replaced(values: NDArray | None, index: NDArray[np.intp], other: NDArray | None) -> NDArray | None:
+    """`values` with the rows at `index` set to `other`'s, or kept where `other` is None."""
+    if values is None or other is None:
+        return values
+    values = values.copy()
+    values[index] = other
+    return values
 
 
 @dataclass(frozen=True)

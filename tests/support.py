@@ -16,7 +16,7 @@ import pytest
 from rafostrack.config import load_config
 from rafostrack.errors import InputError, Warnings
 from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
-from rafostrack.motion import IntegratedOU, RandomWalk
+from rafostrack.motion import ClockWalk, IntegratedOU, RandomWalk
 from rafostrack.summaries.estimates import Estimate
 
 try:
@@ -141,6 +141,8 @@ LINEAR_GAUSSIAN_CASES = {
     "random_walk": RandomWalk(5.0),
     "ou": IntegratedOU(velocity_sd_km_per_day=6.0, decorrelation_days=4.0, mean_current_km_per_day=(3.0, -1.0)),
 }
+# The float clock in the state (the first pass's `ClockWalk`), about a drift model.
+CLOCKED_CASES = {"ou+clock": ClockWalk(LINEAR_GAUSSIAN_CASES["ou"], 2.0, 1.0)}
 
 
 def truth_estimate(sim) -> Estimate:

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+import pandas as pd
 
 from rafostrack.config import load_config, with_overrides
 from rafostrack.likelihoods import RankedArrivals
+from rafostrack.motion import ClockWalk
 from rafostrack.problem import FloatProblem
 from rafostrack.run.method import track_record
 from rafostrack.run.one_pass import Tracker
+from rafostrack.sim.evaluate import position_errors_km
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import simulate_mission
 from rafostrack.summaries.posterior import summarise
@@ -76,3 +81,36 @@ def test_filter_only_memory_does_not_grow_with_the_record():
         tracemalloc.stop()
     assert history_bytes >= 24e6
     assert peak < 0.5 * history_bytes
+
+
+def test_with_the_clock_in_the_state_a_wrong_end_clock_offset_does_not_move_the_track():
+    """A float whose clock drifted 40 s in 60 days, tracked with floats.csv saying it never
+    drifted (end offset = start offset): the filter that takes the table's clock as given
+    moves the float to explain the growing common shift; with each particle's clock
+    correction in the state (`ClockWalk`, as in the first pass) the track stays on the
+    truth and the correction follows the true clock (the generator is the tracker's own
+    simulator, with the clock it was told)."""
+    beacons, (info,) = synthetic_scenario(days=60, rng=5)
+    true_info = dataclasses.replace(info, clock_offset_start_s=0.0, clock_offset_end_s=40.0)
+    model = dataclasses.replace(load_config().model, toa_sigma_s=1.0, clutter_rate=0.5)
+    sim = simulate_mission(beacons, [true_info], model, np.random.default_rng(5)).floats[0]
+    told = dataclasses.replace(true_info, clock_offset_end_s=0.0)
+    config = with_overrides(load_config(), filter={"particles": 500}, model={"toa_sigma_s": 1.0, "clutter_rate": 0.5})
+    tracker = Tracker.from_problem(FloatProblem(beacons, told, config))
+    clocked = dataclasses.replace(tracker, motion=ClockWalk(tracker.motion, 0.5, 0.5))
+    errors, clock_errors = {}, []
+    for name, t in (("table", tracker), ("clocked", clocked)):
+        run = t.run_filter(sim.record)
+        windows = [s for s in run.steps if s.window is not None]
+        means = [summarise(s.cloud.lat, s.cloud.lon, s.cloud.weights) for s in windows]
+        estimate = pd.DataFrame({"time": [s.cloud.time for s in windows], "lat": [m.lat for m in means],
+                                 "lon": [m.lon for m in means]})  # fmt: skip
+        errors[name] = position_errors_km(estimate, sim.truth)
+        if name == "clocked":
+            for s in windows[-20:]:
+                true_correction = float(true_info.clock_offset_s(s.cloud.time) - told.clock_offset_s(s.cloud.time))
+                clock_errors.append(float(s.cloud.weights @ s.cloud.particles.clock_s) - true_correction)
+    late = slice(-20, None)  # the last 20 windows: the true clock 27-40 s from the table's
+    assert np.sqrt(np.mean(errors["table"][late] ** 2)) > 20.0  # 58 km here
+    assert np.sqrt(np.mean(errors["clocked"][late] ** 2)) < 5.0  # 2.9 km here
+    assert np.sqrt(np.mean(np.square(clock_errors))) < 2.5  # 1.6 s here

@@ -15,7 +15,15 @@ import pytest
 from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import Particles
 from rafostrack.model.geodesy import local_offsets_km
-from rafostrack.motion import MOTION_MODELS, IntegratedOU, MotionModel, RandomWalk, motion_from_config
+from rafostrack.motion import (
+    MOTION_MODELS,
+    ClockWalk,
+    IntegratedOU,
+    JumpMixture,
+    MotionModel,
+    RandomWalk,
+    motion_from_config,
+)
 
 LAT0, LON0 = -57.0, -95.0
 
@@ -141,3 +149,52 @@ def test_ou_limits_ballistic_then_diffusive():
     assert short.Q[0, 0] == pytest.approx(2 * 16.0 * 0.01**3 / (3 * 10.0), rel=1e-2)  # 2 sigma^2 D^3 / (3 T)
     long_days = 2000.0
     assert model.transition(long_days).Q[0, 0] == pytest.approx(2 * 16.0 * 10.0 * long_days, rel=0.02)
+
+
+# The float clock in the state (`motion.clock.ClockWalk`), about the OU drift with jumps.
+CLOCKED = ClockWalk(JumpMixture(CASES["ou"], 0.05, 50.0), walk_s_per_sqrt_day=0.7, start_sd_s=1.5)
+
+
+def test_clock_walk_draws_the_clock_as_a_random_walk_and_leaves_the_drift_alone():
+    """From one state, 20,000 draws over 2.5 days: the clock's change is N(0, q^2 dt),
+    independent of the position (correlation within 4 standard errors of 0), and the
+    position and velocity are the drift's own draws (the same generator gives the same
+    positions as the drift alone)."""
+    n, days = 20_000, 2.5
+    start = Particles(np.full(n, LAT0), np.full(n, LON0), np.tile([1.0, -2.0], (n, 1)), np.full(n, 3.0))
+    moved = CLOCKED.propagate(start, days, np.random.default_rng(8))
+    change = moved.clock_s - 3.0
+    assert abs(change.mean()) < 4 * 0.7 * np.sqrt(days / n)
+    assert change.std() == pytest.approx(0.7 * np.sqrt(days), rel=0.03)
+    east, _ = local_offsets_km(moved.lat, moved.lon, LAT0, LON0)
+    assert abs(np.corrcoef(east, change)[0, 1]) < 4 / np.sqrt(n)
+    alone = CLOCKED.base.propagate(start, days, np.random.default_rng(8))
+    assert np.array_equal(alone.lat, moved.lat) and np.array_equal(alone.velocity_km_per_day, moved.velocity_km_per_day)
+
+
+def test_clock_walk_density_is_the_drift_s_times_the_clock_s_and_its_kernels_carry_the_clock():
+    """log f(x', c' | x, c) = log f_drift(x' | x) + log N(c'; c, q^2 dt); each kernel of
+    `components` is the drift's with the clock's block (1, q sqrt(dt)) appended, and its
+    density of the appended state is that sum (the smoother's view of the same model)."""
+    rng = np.random.default_rng(3)
+    n, days = 50, 1.7
+    start = CLOCKED.initial(LAT0, LON0, 3.0, n, rng)
+    moved = CLOCKED.propagate(start, days, rng)
+    drift = CLOCKED.base.log_transition(start, moved, days)
+    sd = 0.7 * np.sqrt(days)
+    clock = -0.5 * ((moved.clock_s - start.clock_s) / sd) ** 2 - np.log(sd * np.sqrt(2 * np.pi))
+    assert np.allclose(CLOCKED.log_transition(start, moved, days), drift + clock)
+    assert np.allclose(CLOCKED.log_carried_transition(start, moved, days), clock)
+    a, b = CLOCKED.base.plane_states(start, moved)
+    a, b = np.column_stack([a, start.clock_s]), np.column_stack([b, moved.clock_s])
+    terms = [np.log(w) + k.log_density(a, b) for w, k in CLOCKED.components(days)]
+    assert np.allclose(np.logaddexp.reduce(terms, axis=0), drift + clock)
+    assert CLOCKED.dim == 5 and CLOCKED.transition(days).dim == 4
+    assert isinstance(CLOCKED.reversed(), ClockWalk) and CLOCKED.reversed().walk_s_per_sqrt_day == 0.7
+
+
+def test_clock_walk_starts_about_the_launch_clock():
+    cloud = CLOCKED.initial(LAT0, LON0, 2.0, 20_000, np.random.default_rng(4))
+    assert cloud.clock_s.std() == pytest.approx(1.5, rel=0.03) and abs(cloud.clock_s.mean()) < 4 * 1.5 / np.sqrt(20_000)
+    east, _ = local_offsets_km(cloud.lat, cloud.lon, LAT0, LON0)
+    assert np.std(east) == pytest.approx(2.0, rel=0.03)

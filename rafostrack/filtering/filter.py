@@ -329,7 +329,9 @@ class ParticleFilter:
         evidence, which proposal each came from (0 = motion) and the log weight correction
         log f(x' | x) - log [alpha_0 f(x' | x) + sum_k alpha_k q_k(x' | x)]
         (multiple importance sampling, balance heuristic: every draw is weighted by the
-        mixture it may have come from)."""
+        mixture it may have come from). A proposal redraws the position (and velocity); the
+        part of the state it carries over from the motion's draw (`MotionModel.
+        log_carried_transition`, the float clock) has the motion's density under it too."""
         n = len(moved)
         alphas = np.array([1.0 - sum(a for a, _ in proposals)] + [a for a, _ in proposals])
         source = rng.choice(len(alphas), size=n, p=alphas)
@@ -341,7 +343,9 @@ class ParticleFilter:
         if len(redrawn):
             evidence = _merge_evidence(evidence, redrawn, self._evaluate(moved.take(redrawn), obs))
         log_f = self.motion.log_transition(before, moved, dt_days)
-        terms = [np.log(alphas[0]) + log_f] + [np.log(a) + q.log_density(before, moved) for a, q in proposals]
+        carried = self.motion.log_carried_transition(before, moved, dt_days)  # a proposal's draw carries it over
+        terms = [np.log(alphas[0]) + log_f]
+        terms += [np.log(a) + q.log_density(before, moved) + carried for a, q in proposals]
         return moved, evidence, source, log_f - np.logaddexp.reduce(np.array(terms), axis=0)
 
 

@@ -79,9 +79,10 @@ class CandidateSearch:
     fine_km: float = 1.5
     n_peaks: int = 6
 
-    def search(self, lat0: float, lon0: float, window: Window) -> Candidates:
+    def search(self, lat0: float, lon0: float, window: Window, clock_s: float | None = None) -> Candidates:
         """Every fine-grid position around the best coarse peaks within `radius_km` of
-        (lat0, lon0), with its exact window log-likelihood."""
+        (lat0, lon0), with its exact window log-likelihood (at the float clock correction
+        `clock_s` where the clock is part of the state)."""
         if window.n_signals == 0:
             return Candidates(np.zeros(0), np.zeros(0), np.zeros(0))
         east, north = _disc(self.radius_km, self.coarse_km)
@@ -89,14 +90,19 @@ class CandidateSearch:
         widened = self.arrivals.with_toa_sigma(
             float(np.hypot(self.arrivals.model.toa_sigma_s, self.coarse_km / (2.0 * KM_PER_S)))
         )
-        coarse = widened.evaluate(Particles(lat, lon), window, marginals=False).loglik
+        coarse = widened.evaluate(_at_clock(lat, lon, clock_s), window, marginals=False).loglik
         peaks = _non_max_suppression(east, north, coarse, self.n_peaks, 2.0 * self.coarse_km)
         fe, fn = _disc(self.coarse_km, self.fine_km)
         e = (east[peaks][:, None] + fe[None, :]).ravel()
         n = (north[peaks][:, None] + fn[None, :]).ravel()
         lat, lon = displace(np.full(len(e), lat0), np.full(len(e), lon0), e, n)
-        loglik = self.arrivals.evaluate(Particles(lat, lon), window, marginals=False).loglik
+        loglik = self.arrivals.evaluate(_at_clock(lat, lon, clock_s), window, marginals=False).loglik
         return Candidates(lat, lon, loglik)
+
+
+def _at_clock(lat: NDArray, lon: NDArray, clock_s: float | None) -> Particles:
+    """Search nodes as particles, all at the float clock correction `clock_s` (if any)."""
+    return Particles(lat, lon, clock_s=None if clock_s is None else np.full(len(lat), clock_s))
 
 
 @dataclass(frozen=True)
@@ -206,7 +212,8 @@ class RecoveryMonitor:
         self._since_check = 0
         self.n_checks += 1
         centre = int(np.argmax(prior_weights))  # the predicted cloud's heaviest particle
-        candidates = self.search.search(float(predicted.lat[centre]), float(predicted.lon[centre]), window)
+        clock = None if predicted.clock_s is None else float(predicted.clock_s[centre])
+        candidates = self.search.search(float(predicted.lat[centre]), float(predicted.lon[centre]), window, clock)
         if candidates.best - float(loglik.max()) < s.min_gain_nats:
             return None
         self.n_reseeds += 1

@@ -37,6 +37,12 @@ from .quality import quality_log_ratio
 NEGLIGIBLE_MASS = 1e-6
 
 
+def with_particle_clock(mu: NDArray[np.float64], particles: Particles) -> NDArray[np.float64]:
+    """Predicted arrivals (P, s) with each particle's float clock correction added, where
+    the clock is part of the state (`motion.clock.ClockWalk`): mu_i(X, t) + c."""
+    return mu if particles.clock_s is None else mu + particles.clock_s[:, None]
+
+
 class ArrivalLikelihood(Likelihood):
     """Evidence of a window's stored arrival times, for one float."""
 
@@ -100,6 +106,7 @@ class RankedArrivals(ArrivalLikelihood):
         wb, mu, p_detect = m.window_prediction(
             self.beacons, self.info, self.model, particles.lat, particles.lon, window.time
         )
+        mu = with_particle_clock(mu, particles)
         if self._simulator is not None:
             time_ns = int(np.asarray(window.time, dtype="datetime64[ns]").astype(np.int64)) % (1 << 64)
             entropy = (self.seed, zlib.crc32(self.info.float_id.encode("utf-8")), time_ns)
@@ -149,6 +156,7 @@ class LabelledArrivals(ArrivalLikelihood):
         rows = np.array(sorted({self._beacon_row[b] for b in window.beacon_id if b is not None}), dtype=np.intp)
         wb = m.window_beacons(self.beacons, self.info, window.time, index=rows)
         mu = m.predicted_toa_s(m.beacon_ranges_m(particles.lat, particles.lon, wb), wb, self.model)
+        mu = with_particle_clock(mu, particles)
         column = {int(r): c for c, r in enumerate(rows)}
         label_index = np.array(
             [column[self._beacon_row[b]] if b is not None else -1 for b in window.beacon_id], dtype=np.intp

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from ..config import MotionConfig
 from .base import JumpMixture, LinearGaussian, MotionModel
+from .clock import ClockWalk
 from .ou import IntegratedOU
 from .random_walk import RandomWalk
 
@@ -21,6 +22,7 @@ def motion_from_config(cfg: MotionConfig) -> MotionModel:
 
 __all__ = [
     "MOTION_MODELS",
+    "ClockWalk",
     "IntegratedOU",
     "JumpMixture",
     "LinearGaussian",

@@ -132,6 +132,12 @@ class MotionModel(ABC):
         terms = [np.log(w) + k.log_density(a, b) for w, k in self.components(max(dt_days, 0.0)) if w > 0]
         return np.logaddexp.reduce(np.array(terms), axis=0)
 
+    def log_carried_transition(self, now: Particles, nxt: Particles, dt_days: float) -> NDArray[np.float64]:
+        """log density of the part of the transition that a data-driven proposal does not
+        redraw but carries over from the motion's own draw (the float clock of
+        `clock.ClockWalk`); zero for a drift model alone."""
+        return np.zeros(len(now))
+
     def stationary_velocity(self) -> tuple[NDArray[np.float64], float]:
         """Mean (east, north) and per-axis sd (km/day) of the velocity a freshly launched
         float is given; only for models with velocity."""

@@ -3,7 +3,10 @@
     1. First pass: filter and smoother with robust settings: the TOA noise sd widened to
        `[calibrate] first_pass_toa_sigma_s`, so that timing errors of a few seconds (a
        sound speed off by 0.5%, a source clock off its catalogue) do not lose the float,
-       and the configured drift model (broad by default).
+       the float clock in the state (`motion.clock.ClockWalk`, `[calibrate]
+       first_pass_clock_walk_s_per_sqrt_day`), so that a wrong or missing end clock offset
+       in floats.csv does not move the track, and the configured drift model (broad by
+       default).
     2. Calibration (`rafostrack.calibrate`) from its confident labels: a batch Kalman
        smoother of the track with the timing parameters and the float clock in the state,
        its hyperparameters (drift, noise, clock wander) by maximum marginal likelihood.
@@ -30,6 +33,7 @@ from ..calibrate.metadata_checks import CONTRADICTED, MetadataCheck, warnings_of
 from ..calibrate.source_scan import source_scan, with_supported_schedule
 from ..config import Config, with_overrides
 from ..domain import ArrivalRecord
+from ..motion import ClockWalk
 from ..problem import FloatProblem
 from .one_pass import Tracker, TrackOutput
 
@@ -161,7 +165,7 @@ def _calibrating_passes(problem: FloatProblem, record: ArrivalRecord, told: Pass
     and calibrated again."""
     config = problem.config
     robust = problem.with_config(first_pass_config(config))
-    out = _feeding_calibration(Tracker.from_problem(robust)).track(record, progress=told(1))
+    out = _clock_in_state(_feeding_calibration(Tracker.from_problem(robust)), config).track(record, progress=told(1))
     spent = {"filter_s": out.filter_s, "smoother_s": out.smoother_s, "calibrate_s": 0.0}
     calibration: Calibration | None = None
     scanned: list[MetadataCheck] = []
@@ -185,6 +189,17 @@ def _calibrating_passes(problem: FloatProblem, record: ArrivalRecord, told: Pass
             spent["filter_s"] += out.filter_s
             spent["smoother_s"] += out.smoother_s
     return _CalibratingPasses(calibration, problem, scanned, spent)
+
+
+def _clock_in_state(tracker: Tracker, config: Config) -> Tracker:
+    """`tracker` with each particle's correction to the table's float clock in its state
+    (`motion.clock.ClockWalk`: a walk of `[calibrate] first_pass_clock_walk_s_per_sqrt_day`
+    from `[fixes] clock_offset_sd_s` at launch), as the first pass tracks; unchanged when
+    the walk is 0."""
+    walk = config.calibrate.first_pass_clock_walk_s_per_sqrt_day
+    if walk <= 0:
+        return tracker
+    return dataclasses.replace(tracker, motion=ClockWalk(tracker.motion, walk, config.fixes.clock_offset_sd_s))
 
 
 def _feeding_calibration(tracker: Tracker) -> Tracker:

@@ -32,7 +32,7 @@ from ..likelihoods import (
     PositionFixLikelihood,
     arrivals_from_config,
 )
-from ..motion import JumpMixture, MotionModel, motion_from_config
+from ..motion import ClockWalk, JumpMixture, MotionModel, motion_from_config
 from ..problem import FloatProblem
 from ..smoothing.ffbsm import MAX_COLUMNS, Smoothed, column_points, smooth
 from ..smoothing.two_filter import JOIN_COLUMNS, forward_view, two_filter_smooth
@@ -188,13 +188,14 @@ class Tracker:
 
     def _joins_two_filters(self, record: ArrivalRecord) -> bool:
         """Whether the smoother joins a backward filter (`two_filter`): configured, an end fix
-        after every window, and no move factors (the backward filter would need them
-        reversed)."""
+        after every window, no move factors (the backward filter would need them reversed)
+        and no float clock in the state (the backward filter would need it at the end)."""
         end = self.end_fix
         return (
             self.two_filter
             and end is not None
             and not self.factors
+            and not isinstance(self.motion, ClockWalk)
             and all(w.time <= end.time for w in record.windows)
             and len(record.windows) > 0
         )

@@ -49,11 +49,14 @@ MAX_COLUMNS = 2000
 
 
 def plane_states(cloud: Cloud, index: NDArray[np.intp], ref_lat: float, ref_lon: float) -> NDArray[np.float64]:
-    """(n, d) tangent-plane states about (ref_lat, ref_lon): east, north km [, velocity]."""
+    """(n, d) tangent-plane states about (ref_lat, ref_lon): east, north km [, velocity]
+    [, float clock s] (the layout of `MotionModel.components`)."""
     east, north = local_offsets_km(cloud.lat[index], cloud.lon[index], ref_lat, ref_lon)
     columns = [east, north]
     if cloud.particles.velocity_km_per_day is not None:
         columns += list(cloud.particles.velocity_km_per_day[index].T)
+    if cloud.particles.clock_s is not None:
+        columns.append(cloud.particles.clock_s[index])
     return np.column_stack(columns)
 
 
