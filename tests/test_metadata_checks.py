@@ -25,10 +25,11 @@ from rafostrack.calibrate.metadata_checks import (
     warnings_of,
     with_position_alternative,
 )
-from rafostrack.calibrate.source_scan import source_scan
+from rafostrack.calibrate.source_scan import schedule_candidates
 from rafostrack.config import load_config, with_overrides
 from rafostrack.model.geodesy import displace
 from rafostrack.problem import FloatProblem
+from rafostrack.run.method import track_record
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import simulate_mission
 
@@ -243,13 +244,16 @@ def test_a_wrong_source_position_is_named_and_the_source_moved():
 @pytest.mark.parametrize("shift_s", [600.0, -30.0])
 def test_a_source_in_the_wrong_slot_or_far_off_is_found_by_the_scan(simulated, shift_s):
     """The source scan finds a source whose table offset is a slot (600 s) or 30 s off,
-    where its signals are never labelled to it, and only that source."""
+    where its signals are never labelled to it, and only that source: the record's
+    likelihood along the track rises by far more than the candidates' threshold."""
     estimate, record, beacons, info = simulated
     true = float(beacons.offset_s[2])
     offset = beacons.offset_s.copy()
     offset[2] = true + shift_s
     wrong = FloatProblem(dataclasses.replace(beacons, offset_s=offset), info, CONFIG)
-    (check,) = source_scan(wrong, estimate, record, info)
+    (candidate,) = schedule_candidates(wrong, estimate, record, info)
+    (check,) = candidate.checks
+    assert candidate.gain_nats > 100
     assert (check.id, check.field, check.given) == ("B3", "offset_s", true + shift_s)
     assert abs(check.supported - true) < 3.0
     assert check.warning().startswith(f"beacons.csv: line 4: field 'offset_s' of B3: given {true + shift_s:.4g} s")
@@ -260,7 +264,8 @@ def test_a_source_active_before_its_table_start_is_found_by_the_scan(simulated):
     start = beacons.start.copy()
     start[5] = info.launch_time + np.timedelta64(30, "D")
     late = FloatProblem(dataclasses.replace(beacons, start=start), info, CONFIG)
-    (check,) = source_scan(late, estimate, record, info)
+    (candidate,) = schedule_candidates(late, estimate, record, info)
+    (check,) = candidate.checks
     assert (check.id, check.field) == ("B6", "start")
     first_window = min(w.time for w in record.windows if w.n_signals)
     assert np.datetime64(check.supported.rstrip("Z")) - first_window < np.timedelta64(3, "D")
@@ -268,4 +273,21 @@ def test_a_source_active_before_its_table_start_is_found_by_the_scan(simulated):
 
 def test_the_scan_finds_nothing_in_right_tables(simulated):
     estimate, record, beacons, info = simulated
-    assert source_scan(FloatProblem(beacons, info, CONFIG), estimate, record, info) == []
+    assert schedule_candidates(FloatProblem(beacons, info, CONFIG), estimate, record, info) == []
+
+
+@pytest.mark.slow
+def test_the_method_keeps_a_scanned_schedule_only_where_the_record_s_evidence_rises(simulated):
+    """With the scan on, the whole method (`track_record`) tries the strongest candidate by
+    tracking the record again: a source put a slot off in the table is named and tracked
+    with its true offset; with right tables nothing is named."""
+    _, record, beacons, info = simulated
+    config = with_overrides(CONFIG, checks={"source_scan": True}, filter={"particles": 500})
+    offset = beacons.offset_s.copy()
+    offset[2] += 600.0
+    wrong = track_record(FloatProblem(dataclasses.replace(beacons, offset_s=offset), info, config), record)
+    named = [(c["id"], c["field"]) for c in wrong.metadata_checks if c["outcome"] == CONTRADICTED]
+    assert named == [("B3", "offset_s")]
+    assert abs(wrong.problem.beacons.offset_s[2] - beacons.offset_s[2]) < 3.0
+    right = track_record(FloatProblem(beacons, info, config), record)
+    assert [c for c in right.metadata_checks if c["outcome"] == CONTRADICTED] == []

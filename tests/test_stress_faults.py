@@ -19,6 +19,7 @@ from rafostrack.sim.faults import (
     InjectedFault,
     apply_faults,
     false_alarms,
+    observable,
     read_faults,
     unnamed_faults,
 )
@@ -229,3 +230,20 @@ def test_a_source_position_fault_is_named_by_an_offset_that_names_the_position_a
     assert unnamed_faults([moved], [either]) == [] and false_alarms([moved], [either]) == []
     wrong_offset = InjectedFault("source_offset", "beacons.csv", "US1-6", "offset_s", 360.0, 390.0)
     assert unnamed_faults([wrong_offset], [either]) == []  # and it still names an offset
+
+
+def test_a_source_fault_shows_only_on_a_float_that_stored_the_source_s_signals_where_it_acts():
+    """`observable`: a floats.csv fault always; a source's where the float stored at least
+    `MIN_OBSERVED` of its signals, inside the period the table leaves out for an active
+    period written too short."""
+    days = pd.date_range("2008-03-01", periods=40, freq="D", tz="UTC")
+    arrivals = pd.DataFrame({"time": days.strftime("%Y-%m-%dT%H:%M:%SZ"), "beacon_id": ["W2d"] * 40})
+    arrivals.loc[:4, "beacon_id"] = np.nan  # clutter in the first five windows
+    offset = InjectedFault("source_offset", "beacons.csv", "W2d", "offset_s", 300.0, 330.0)
+    assert observable(offset, arrivals) and not observable(dataclasses.replace(offset, id="W7a"), arrivals)
+    late = InjectedFault("source_active", "beacons.csv", "W2d", "start", "2008-03-01T00:00:00Z", "2008-03-19T00:00:00Z")
+    assert observable(late, arrivals)  # 13 of its signals before the written start (5 are clutter)
+    assert not observable(dataclasses.replace(late, written="2008-03-13T00:00:00Z"), arrivals)  # 7
+    early = InjectedFault("source_active", "beacons.csv", "W2d", "end", "2008-04-09T00:00:00Z", "2008-04-01T00:00:00Z")
+    assert not observable(early, arrivals)  # 8 after the written end
+    assert observable(InjectedFault("launch_fix", "floats.csv", "f1", "launch_fix", (0.0, 0.0), (0.1, 0.0)), arrivals)

@@ -7,18 +7,28 @@ where they arrive has none: its signals are labelled clutter, and it is never ch
 From a pass's track, every stored TOA of every window is compared with each source's
 predicted arrival time (table values, the calibrated clock): the residuals r = T - mu of a
 source's own signals pile up at one value, its offset error, while other sources' signals
-and clutter spread over the window. Per source, the windows with a residual within
-`MATCH_S` of d are counted, N(d), over the candidate offsets d on a grid of `MATCH_S` / 2;
-against the count clutter alone gives, E = sum over windows of 1 - (1 - 2 MATCH_S / window_s)^n_w,
+(those within `EXPLAINED_S` of another active source's prediction are left out) and
+clutter spread over the window. Per source, the windows with a residual within `MATCH_S`
+of d are counted, N(d), over the candidate offsets d on a grid of `MATCH_S` / 2; the best d
+beyond `[checks] offset_tolerance_s`, with N(d) >= `MIN_HITS` and N(d) > 2 N(0), is the
+source's candidate offset (the table's plus the median residual of its hits). Its active
+period likewise: hits at the (candidate) offset in windows outside the table's period, at
+least `MIN_HITS` and beyond what clutter gives by `CANDIDATE_Z` Poisson sds, make the
+first (last) hit a candidate start (end).
 
-    the offset is contradicted where the best d lies beyond `[checks] offset_tolerance_s`,
-    N(d) >= `MIN_HITS`, (N(d) - E) / sqrt(E) > `[checks] z_score` and N(d) > 2 N(0);
+A pile can be chance (clutter, or signals of another source the track does not place
+right), so a candidate is weighed by the tracker's own model: the record's log-likelihood
+at the track's positions, association summed out, misses and clutter included (the first
+pass's TOA noise, the configured detection), with the candidate's schedule against the
+table's,
 
-the supported offset is the table's plus the median residual of its hits. Its active
-period likewise: hits at the (supported) offset in windows outside the table's period,
-beyond clutter by `z_score` and at least `MIN_HITS`, contradict the start (or end), and the
-first (last) hit is the supported one. A shift that most heard sources share is the clock's
-(calibration's to estimate), not theirs: then nothing is contradicted.
+    gain = sum_w log p(T_w | x_w, candidate) - sum_w log p(T_w | x_w, table),
+
+and only candidates gaining more than `MIN_GAIN_NATS` are returned, strongest first. A
+chance pile gains where it hits and loses wherever the moved source is due and not heard.
+The gain holds the track fixed, and a track pulled by one wrong source makes others look
+shifted: the method (`run.method`) therefore tracks the record again with the strongest
+candidate and keeps it only where the whole record's evidence rises.
 """
 
 from __future__ import annotations
@@ -29,7 +39,9 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from ..domain import ArrivalRecord, BeaconTable, FloatInfo
+from ..config import with_overrides
+from ..domain import ArrivalRecord, BeaconTable, FloatInfo, Particles
+from ..likelihoods import arrivals_from_config
 from ..model import measurement as m
 from ..problem import FloatProblem
 from ..summaries.estimates import Estimate
@@ -38,8 +50,8 @@ from .metadata_checks import CONTRADICTED, MetadataCheck, beacon_source
 MATCH_S = 10.0  # a TOA within this of a source's prediction matches it (track and timing errors)
 EXPLAINED_S = 60.0  # a TOA this near another active source's prediction may be its signal
 MIN_HITS = 10
-SHARED_FRACTION = 0.5  # a shift found on more than this share of the scanned sources is the clock's
-MAX_FINDINGS = 4  # sources corrected at most (`source_scan`)
+CANDIDATE_Z = 3.0  # hits outside the table's period beyond clutter by this many Poisson sds
+MIN_GAIN_NATS = 25.0  # a candidate gaining less than this along a fixed track is not tried
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,8 +112,8 @@ def _excess_z(count: int, expected: float) -> float:
     return (count - expected) / float(np.sqrt(max(expected, 1.0)))
 
 
-def _significant(count: int, expected: float, z: float) -> bool:
-    return count >= MIN_HITS and _excess_z(count, expected) > z
+def _significant(count: int, expected: float) -> bool:
+    return count >= MIN_HITS and _excess_z(count, expected) > CANDIDATE_Z
 
 
 def _best_shift(res: _Residuals, window_s: float) -> tuple[float, int]:
@@ -122,61 +134,66 @@ def _best_shift(res: _Residuals, window_s: float) -> tuple[float, int]:
     return float(grid[best]), int(counts[best])
 
 
-def source_scan(
+@dataclasses.dataclass(frozen=True)
+class ScheduleCandidate:
+    """One source's schedule as the arrivals along a track place it: the table values it
+    contradicts (offset, start, end) and its log-likelihood gain (module docstring)."""
+
+    checks: list[MetadataCheck]
+    gain_nats: float
+
+
+def schedule_candidates(
     problem: FloatProblem, estimate: Estimate, record: ArrivalRecord, clock: FloatInfo
-) -> list[MetadataCheck]:
-    """Each source's offset and active period from where its signals arrive along
-    `estimate`'s track (module docstring); `clock` the float's description with its
-    calibrated clock. One finding at a time, the strongest first, the table corrected and
-    scanned again (another source's wrongly placed signals are free TOAs, and a second
-    source may find a chance alignment with them until the first is put right); only
-    contradicted values are returned."""
-    beacons = problem.beacons
-    found: list[MetadataCheck] = []
-    for _ in range(MAX_FINDINGS):
-        candidates = _scan_once(problem, beacons, estimate, record, clock)
-        if not candidates:
-            break
-        best = max(candidates, key=lambda c: c[0])[1]
-        found += best
-        beacons = with_supported_schedule(beacons, best)
-    shifted = [c for c in found if c.field == "offset_s"]
-    if shifted and len(shifted) > SHARED_FRACTION * max(1, _scanned(problem.beacons, record)):
-        return [c for c in found if c.field != "offset_s"]  # the clock's, not the sources'
-    return found
-
-
-def _scan_once(
-    problem: FloatProblem, beacons: BeaconTable, estimate: Estimate, record: ArrivalRecord, clock: FloatInfo
-) -> list[tuple[float, list[MetadataCheck]]]:
-    """Every source's findings under `beacons`, each source's with its strength (z)."""
-    info, config = problem.info, problem.config
-    z, window_s = config.checks.z_score, info.window_s
-    candidates = []
+) -> list[ScheduleCandidate]:
+    """Each source's candidate schedule along `estimate`'s track (module docstring), `clock`
+    the float's description with its calibrated clock: those gaining more than
+    `MIN_GAIN_NATS`, strongest first."""
+    beacons, info, config = problem.beacons, problem.info, problem.config
+    window_s = info.window_s
+    found = []
     for row, res in enumerate(_residuals(record, estimate.track, beacons, clock, config.model)):
         if res.active.sum() < MIN_HITS:
             continue
         shift, count = _best_shift(res, window_s)
         at_table = int(_hits(res, 0.0, res.active).sum())
-        expected = _background(res, res.active, window_s)
-        moved = (
-            abs(shift) > config.checks.offset_tolerance_s and _significant(count, expected, z) and count > 2 * at_table
-        )
-        findings = []
+        moved = abs(shift) > config.checks.offset_tolerance_s and count >= MIN_HITS and count > 2 * at_table
+        checks = []
         if moved:
             near = np.abs(res.residual_s - shift) <= MATCH_S
-            findings.append(_offset_check(beacons, row, float(np.median(res.residual_s[near]))))
-        period_strength, periods = _period_checks(beacons, row, res, shift if moved else 0.0, window_s, z)
-        if findings or periods:
-            strength = _excess_z(count, expected) if moved else 0.0
-            candidates.append((max(strength, period_strength), findings + periods))
-    return candidates
+            checks.append(_offset_check(beacons, row, float(np.median(res.residual_s[near]))))
+        checks += _period_checks(beacons, row, res, shift if moved else 0.0, window_s)
+        if checks:
+            found.append(checks)
+    if not found:
+        return []
+    table = _record_loglik(problem, beacons, estimate, record, clock)
+    candidates = []
+    for checks in found:
+        gain = float(_record_loglik(problem, with_supported_schedule(beacons, checks), estimate, record, clock) - table)
+        if gain > MIN_GAIN_NATS:
+            candidates.append(ScheduleCandidate(checks, round(gain, 1)))
+    return sorted(candidates, key=lambda c: c.gain_nats, reverse=True)
 
 
-def _scanned(beacons: BeaconTable, record: ArrivalRecord) -> int:
-    """How many sources are active in at least `MIN_HITS` windows with TOAs."""
-    times = [w.time for w in record.windows if w.n_signals > 0]
-    return int(sum(np.sum([beacons.active_at(t)[i] for t in times]) >= MIN_HITS for i in range(len(beacons))))
+def _record_loglik(
+    problem: FloatProblem, beacons: BeaconTable, estimate: Estimate, record: ArrivalRecord, clock: FloatInfo
+) -> float:
+    """The record's log-likelihood at the track's positions under `beacons`: the ranked
+    model with the first pass's TOA noise and the configured detection."""
+    config = problem.config
+    sigma = max(config.model.toa_sigma_s, config.calibrate.first_pass_toa_sigma_s)
+    likelihood = arrivals_from_config(
+        beacons, clock, with_overrides(config, filter={"likelihood": "ranked"}, model={"toa_sigma_s": sigma})
+    )
+    at = estimate.track.set_index("time")
+    windows = [w for w in record.windows if w.time in at.index]
+    times = [w.time for w in windows]
+    lat, lon = at.loc[times, "lat"].to_numpy(), at.loc[times, "lon"].to_numpy()
+    return float(
+        sum(likelihood.evaluate(Particles(lat[k : k + 1], lon[k : k + 1]), w, marginals=False).loglik[0]
+            for k, w in enumerate(windows))
+    )  # fmt: skip
 
 
 def _offset_check(beacons: BeaconTable, row: int, shift_s: float) -> MetadataCheck:
@@ -187,12 +204,12 @@ def _offset_check(beacons: BeaconTable, row: int, shift_s: float) -> MetadataChe
 
 
 def _period_checks(
-    beacons: BeaconTable, row: int, res: _Residuals, shift_s: float, window_s: float, z: float
-) -> tuple[float, list[MetadataCheck]]:
+    beacons: BeaconTable, row: int, res: _Residuals, shift_s: float, window_s: float
+) -> list[MetadataCheck]:
     """The start and end against the hits at `shift_s` in the windows outside the table's
-    period; the findings and the strongest one's z."""
+    period (module docstring)."""
     file, line, name = beacon_source(beacons, row)
-    found, strongest = [], 0.0
+    found = []
     for field, outside, pick in (
         ("start", res.time < beacons.start[row], np.min),
         ("end", res.time > beacons.end[row], np.max),
@@ -200,15 +217,13 @@ def _period_checks(
         if not outside.any():
             continue
         hits = _hits(res, shift_s, outside)
-        expected = _background(res, outside, window_s)
-        if not _significant(int(hits.sum()), expected, z):
+        if not _significant(int(hits.sum()), _background(res, outside, window_s)):
             continue
-        strongest = max(strongest, _excess_z(int(hits.sum()), expected))
         given, supported = _iso(getattr(beacons, field)[row]), _iso(pick(res.time[hits]))
         found.append(
             MetadataCheck(file, line, name, field, given, supported, None, "time", CONTRADICTED, used=supported)
         )
-    return strongest, found
+    return found
 
 
 def _iso(time: np.datetime64) -> str:

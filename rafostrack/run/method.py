@@ -27,10 +27,12 @@ import dataclasses
 import time
 from collections.abc import Callable
 
+import numpy as np
+
 from ..calibrate import Calibration, calibrate
 from ..calibrate.launch_check import launch_check
 from ..calibrate.metadata_checks import CONTRADICTED, MetadataCheck, warnings_of
-from ..calibrate.source_scan import source_scan, with_supported_schedule
+from ..calibrate.source_scan import schedule_candidates, with_supported_schedule
 from ..config import Config, with_overrides
 from ..domain import ArrivalRecord
 from ..motion import ClockWalk
@@ -42,6 +44,7 @@ from .one_pass import Tracker, TrackOutput
 # backward pass costs a quarter, and the sample's first-pass track moves by 0.08 km RMSE
 # with the same labels (docs/decisions.md).
 CALIBRATION_COLUMNS = 512
+MAX_SCHEDULE_FINDINGS = 4  # sources whose schedule the scan corrects at most (`_scanned_schedules`)
 
 PassProgress = Callable[[int], Callable[[int, int], None] | None]  # pass number -> its progress callback
 
@@ -161,11 +164,9 @@ def _calibrating_passes(problem: FloatProblem, record: ArrivalRecord, told: Pass
     """Steps 1-2 and the passes between calibrations: the robust first pass, then
     `[calibrate] iterations` calibrations, each but the last followed by a pass with it. The
     first calibration's clock and the first pass's track feed the source scan
-    (`calibrate.source_scan`); where it contradicts the beacon table, the table is corrected
-    and calibrated again."""
+    (`_scanned_schedules`), which may correct the beacon table and the first pass."""
     config = problem.config
-    robust = problem.with_config(first_pass_config(config))
-    out = _clock_in_state(_feeding_calibration(Tracker.from_problem(robust)), config).track(record, progress=told(1))
+    out = _first_pass(problem).track(record, progress=told(1))
     spent = {"filter_s": out.filter_s, "smoother_s": out.smoother_s, "calibrate_s": 0.0}
     calibration: Calibration | None = None
     scanned: list[MetadataCheck] = []
@@ -173,12 +174,9 @@ def _calibrating_passes(problem: FloatProblem, record: ArrivalRecord, told: Pass
         started = time.perf_counter()
         start = calibration.hyper if calibration is not None else None
         fitted = calibrate(out.estimate, record, problem, start=start)
-        if fitted is not None and iteration == 0 and config.checks.enabled and config.checks.source_scan:
-            scanned = source_scan(problem, out.estimate, record, fitted.info)
-            if scanned:
-                problem = dataclasses.replace(problem, beacons=with_supported_schedule(problem.beacons, scanned))
-                fitted = calibrate(out.estimate, record, problem, start=fitted.hyper)
         spent["calibrate_s"] += time.perf_counter() - started
+        if fitted is not None and iteration == 0 and config.checks.enabled and config.checks.source_scan:
+            problem, out, fitted, scanned = _scanned_schedules(problem, record, out, fitted, spent)
         if fitted is None:
             break
         calibration = fitted
@@ -189,6 +187,56 @@ def _calibrating_passes(problem: FloatProblem, record: ArrivalRecord, told: Pass
             spent["filter_s"] += out.filter_s
             spent["smoother_s"] += out.smoother_s
     return _CalibratingPasses(calibration, problem, scanned, spent)
+
+
+def _first_pass(problem: FloatProblem) -> Tracker:
+    """The robust first pass's tracker (step 1)."""
+    robust = problem.with_config(first_pass_config(problem.config))
+    return _clock_in_state(_feeding_calibration(Tracker.from_problem(robust)), problem.config)
+
+
+def _scanned_schedules(
+    problem: FloatProblem, record: ArrivalRecord, out: TrackOutput, fitted: Calibration, spent: dict[str, float]
+) -> tuple[FloatProblem, TrackOutput, Calibration, list[MetadataCheck]]:
+    """Sources whose schedule in the table the arrivals contradict (`calibrate.source_scan`),
+    one at a time: the strongest candidate along the first pass's track is tried by tracking
+    the record again with it, and kept where the record's evidence (the filter's sum of
+    log p(y_t | y_1..t-1) over the windows) rises by more than `[checks] z_score`^2 / 2 (the
+    likelihood-ratio counterpart of z sds); the corrected table is then calibrated and
+    scanned again, each source once. The problem, first pass and calibration to go on
+    with, and the contradicted values kept. `spent` adds the trials' seconds."""
+    threshold = problem.config.checks.z_score**2 / 2
+    found: list[MetadataCheck] = []
+    for _ in range(MAX_SCHEDULE_FINDINGS):
+        started = time.perf_counter()
+        corrected = {c.id for c in found}  # a source's schedule is corrected once
+        candidates = [
+            c
+            for c in schedule_candidates(problem, out.estimate, record, fitted.info)
+            if not corrected & {check.id for check in c.checks}
+        ]
+        spent["calibrate_s"] += time.perf_counter() - started
+        if not candidates:
+            break
+        tried = dataclasses.replace(problem, beacons=with_supported_schedule(problem.beacons, candidates[0].checks))
+        trial = _first_pass(tried).track(record)
+        spent["filter_s"] += trial.filter_s
+        spent["smoother_s"] += trial.smoother_s
+        if _record_evidence(trial) - _record_evidence(out) <= threshold:
+            break
+        started = time.perf_counter()
+        refitted = calibrate(trial.estimate, record, tried, start=fitted.hyper)
+        spent["calibrate_s"] += time.perf_counter() - started
+        if refitted is None:
+            break
+        problem, out, fitted = tried, trial, refitted
+        found += candidates[0].checks
+    return problem, out, fitted, found
+
+
+def _record_evidence(out: TrackOutput) -> float:
+    """log p(y_1..T) of a pass's filter: the sum of its windows' log p(y_t | y_1..t-1)."""
+    return float(np.nansum(out.estimate.track["loglik"].to_numpy()))
 
 
 def _clock_in_state(tracker: Tracker, config: Config) -> Tracker:

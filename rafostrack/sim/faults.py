@@ -34,7 +34,8 @@ are enough, the same for every float of the mission.
 
 A fault is named by a run when its `run.json` "metadata_checks" hold an entry with outcome
 "contradicted" for the fault's file, id and one of `naming_fields(fault)`; any other
-contradicted entry is a false alarm.
+contradicted entry is a false alarm. A source's fault can only be named on a float that
+stored enough of the source's signals where the fault acts (`observable`).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from ..domain import BeaconTable, FloatInfo, NaT
 from ..io.csv_table import time_text
@@ -66,6 +68,7 @@ SOURCE_OFFSET_S = (20.0, 40.0)
 SOURCE_DRIFT_S_PER_DAY = (0.02, 0.05)
 SOURCE_ACTIVE_DAYS = (20, 60)
 MIN_SIGN_FLIP_S = 10.0
+MIN_OBSERVED = 10  # a float shows a source's fault where it stored this many of its signals (`observable`)
 
 FLOATS_CSV, BEACONS_CSV = "floats.csv", "beacons.csv"
 DAY = np.timedelta64(86400, "s").astype("timedelta64[ns]")
@@ -322,6 +325,25 @@ def names(check: dict[str, Any], fault: InjectedFault) -> bool:
         and str(check.get("id")) == fault.id
         and any(field in naming_fields(fault) for field in fields)
     )
+
+
+def observable(fault: InjectedFault, arrivals: pd.DataFrame) -> bool:
+    """Whether a float's stored arrivals (`time`, and the true labels in `beacon_id`) can show
+    `fault`: a floats.csv value always; a source's value where the float stored at least
+    `MIN_OBSERVED` of the source's signals, in the period the table leaves out for an
+    active period written too short (a source a float never stored says nothing of its
+    table row)."""
+    if fault.file != BEACONS_CSV:
+        return True
+    mine = arrivals["beacon_id"].astype(str) == fault.id
+    if fault.kind == "source_active":
+        time = pd.to_datetime(arrivals["time"], utc=True)
+        written = pd.Timestamp(str(fault.written))
+        if fault.field == "start":  # the true start, None: active from the first window
+            mine &= (time < written) & ((time >= pd.Timestamp(str(fault.true))) if fault.true else True)
+        else:  # the true end, None: active to the last window
+            mine &= (time > written) & ((time <= pd.Timestamp(str(fault.true))) if fault.true else True)
+    return int(mine.sum()) >= MIN_OBSERVED
 
 
 def unnamed_faults(faults: Iterable[InjectedFault], checks: Sequence[dict[str, Any]]) -> list[InjectedFault]:
