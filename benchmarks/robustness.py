@@ -391,7 +391,8 @@ def _parse_args() -> argparse.Namespace:
     parser.add_argument("--filter-seeds", type=int, nargs="+", help="track every float with each [filter] seed")
     parser.add_argument("--report", type=Path, help="write the results into this Markdown file's robustness section")
     parser.add_argument(
-        "--faults", help=f"metadata faults: KIND[,KIND...], all (together), each (one at a time) or each,all; {FAULT_KINDS}"
+        "--faults",
+        help=f"metadata faults: KIND[,KIND...], all (together), each (one at a time) or each,all; {FAULT_KINDS}",
     )
     parser.add_argument(
         "--never-surfaced",
