@@ -37,9 +37,8 @@ whole method, which the reported sd_km does not include).
 `--report FILE` also writes the tables, the targets and the label reliability into the
 `robustness` section of that Markdown file (`benchmarks/report.py`).
 
-Metadata faults: `--faults KIND[,KIND...]`, `--faults all` (every kind at once),
-`--faults each` (one mission set per kind; kinds in `rafostrack.sim.faults.FAULT_KINDS`) or
-`--faults each,all` (both)
+Metadata faults: `--faults SET [SET ...]`, each SET `all` (every kind at once), `each` (one
+mission set per kind; kinds in `rafostrack.sim.faults.FAULT_KINDS`) or `KIND[,KIND...]`
 simulates the missions with true clocks that drift (end offsets uniform in
 `CLOCK_END_OFFSET_S`) and a share of floats that never surfaced (`--never-surfaced`, default
 `NEVER_SURFACED_SHARE` here, 0 without --faults), tracks every float with the correct tables
@@ -56,7 +55,7 @@ tables' is, no more confidently wrong windows, every fault the float's arrivals 
 floats. The correct tables' run is scored against the stress targets above too.
 `--report` then writes the `robustness-faults` section.
 
-    python benchmarks/robustness.py --faults each [--floats 24] [--days 240] [--never-surfaced 0.1] ...
+    python benchmarks/robustness.py --faults each [all] [--floats 24] [--days 240] [--never-surfaced 0.1] ...
 """
 
 from __future__ import annotations
@@ -392,7 +391,8 @@ def _parse_args() -> argparse.Namespace:
     parser.add_argument("--report", type=Path, help="write the results into this Markdown file's robustness section")
     parser.add_argument(
         "--faults",
-        help=f"metadata faults: KIND[,KIND...], all (together), each (one at a time) or each,all; {FAULT_KINDS}",
+        nargs="+",
+        help=f"metadata fault sets: each (one per kind), all (every kind together), KIND[,KIND...]; {FAULT_KINDS}",
     )
     parser.add_argument(
         "--never-surfaced",
@@ -582,15 +582,19 @@ def _print_spread(out_root: Path, seeds: list[int | None], failing_with: list, f
 # Metadata faults (--faults)
 
 
-def fault_sets(text: str) -> list[tuple[str, tuple[str, ...]]]:
-    """The mission sets of `--faults`: (name, kinds) for `all`, `each` (or both, `each,all`)
-    or `KIND[,KIND...]`."""
-    words = [k.strip() for k in text.split(",")]
-    if set(words) <= {"each", "all"}:
-        sets = {"each": [(kind, (kind,)) for kind in FAULT_KINDS], "all": [("all", FAULT_KINDS)]}
-        return [one for word in dict.fromkeys(words) for one in sets[word]]
-    kinds = check_kinds(words)
-    return [("+".join(kinds), kinds)]
+def fault_sets(words: list[str]) -> list[tuple[str, tuple[str, ...]]]:
+    """The mission sets of `--faults`, one or more per word: `all` (every kind at once),
+    `each` (one set per kind) or `KIND[,KIND...]` (those kinds together)."""
+    sets: list[tuple[str, tuple[str, ...]]] = []
+    for word in words:
+        if word == "all":
+            sets.append(("all", FAULT_KINDS))
+        elif word == "each":
+            sets += [(kind, (kind,)) for kind in FAULT_KINDS]
+        else:
+            kinds = check_kinds(k.strip() for k in word.split(","))
+            sets.append(("+".join(kinds), kinds))
+    return list(dict.fromkeys(sets))
 
 
 def faulted(sim: Simulated, kinds: tuple[str, ...]) -> Simulated:

@@ -100,6 +100,20 @@ def test_a_source_timing_contradiction_names_the_position_where_the_arrivals_can
     ]
 
 
+def test_a_scanned_schedule_that_another_source_explains_as_well_names_both():
+    """A scan finding whose signals another source's shifted schedule explains as well names
+    that source in its warning and in run.json (`other_sources`), and only then."""
+    check = MetadataCheck("beacons.csv", 12, "UK1-2", "offset_s", 2100.0, 1305.7, 10.0, "s", CONTRADICTED,
+                          used=1305.7, other_sources=("UK1-1",))  # fmt: skip
+    assert warnings_of([check]) == [
+        "beacons.csv: line 12: field 'offset_s' of UK1-2: given 2100 s; the arrivals support 1306 s (sd 10 s) "
+        "(or the 'offset_s' of UK1-1 is wrong: these arrivals cannot tell which source's); "
+        "tracked with the arrivals' value"
+    ]
+    assert check.as_json()["other_sources"] == ("UK1-1",)
+    assert "other_sources" not in dataclasses.replace(check, other_sources=()).as_json()
+
+
 @pytest.fixture(scope="module")
 def simulated():
     """A 60-day float whose clock drifts 9 s, and a first-pass estimate made of its truth
@@ -251,7 +265,7 @@ def test_a_source_in_the_wrong_slot_or_far_off_is_found_by_the_scan(simulated, s
     offset = beacons.offset_s.copy()
     offset[2] = true + shift_s
     wrong = FloatProblem(dataclasses.replace(beacons, offset_s=offset), info, CONFIG)
-    (candidate,) = schedule_candidates(wrong, estimate, record, info)
+    (candidate,) = schedule_candidates(wrong, wrong, estimate, record)
     (check,) = candidate.checks
     assert candidate.gain_nats > 100
     assert (check.id, check.field, check.given) == ("B3", "offset_s", true + shift_s)
@@ -264,7 +278,7 @@ def test_a_source_active_before_its_table_start_is_found_by_the_scan(simulated):
     start = beacons.start.copy()
     start[5] = info.launch_time + np.timedelta64(30, "D")
     late = FloatProblem(dataclasses.replace(beacons, start=start), info, CONFIG)
-    (candidate,) = schedule_candidates(late, estimate, record, info)
+    (candidate,) = schedule_candidates(late, late, estimate, record)
     (check,) = candidate.checks
     assert (check.id, check.field) == ("B6", "start")
     first_window = min(w.time for w in record.windows if w.n_signals)
@@ -273,7 +287,8 @@ def test_a_source_active_before_its_table_start_is_found_by_the_scan(simulated):
 
 def test_the_scan_finds_nothing_in_right_tables(simulated):
     estimate, record, beacons, info = simulated
-    assert schedule_candidates(FloatProblem(beacons, info, CONFIG), estimate, record, info) == []
+    right = FloatProblem(beacons, info, CONFIG)
+    assert schedule_candidates(right, right, estimate, record) == []
 
 
 @pytest.mark.slow

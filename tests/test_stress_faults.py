@@ -247,3 +247,13 @@ def test_a_source_fault_shows_only_on_a_float_that_stored_the_source_s_signals_w
     early = InjectedFault("source_active", "beacons.csv", "W2d", "end", "2008-04-09T00:00:00Z", "2008-04-01T00:00:00Z")
     assert not observable(early, arrivals)  # 8 after the written end
     assert observable(InjectedFault("launch_fix", "floats.csv", "f1", "launch_fix", (0.0, 0.0), (0.1, 0.0)), arrivals)
+
+
+def test_a_scan_finding_that_cannot_tell_two_sources_apart_names_the_fault_of_either():
+    slot = InjectedFault("source_slot", "beacons.csv", "UK1-1", "offset_s", 1500.0, 2100.0)
+    either = {"file": "beacons.csv", "id": "UK1-2", "field": "offset_s", "outcome": "contradicted",
+              "other_sources": ["UK1-1"]}  # fmt: skip
+    assert unnamed_faults([slot], [either]) == [] and false_alarms([slot], [either]) == []
+    alone = {k: v for k, v in either.items() if k != "other_sources"}
+    assert unnamed_faults([slot], [alone]) == [slot] and false_alarms([slot], [alone]) == [alone]
+    assert false_alarms([], [either]) == [either]  # with right tables, a false alarm all the same

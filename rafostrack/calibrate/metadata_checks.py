@@ -65,11 +65,16 @@ class MetadataCheck:
     # Other fields of the same row that would explain the arrivals as well (a source's
     # position, where these arrivals cannot tell it from its offset or drift).
     alternatives: tuple[str, ...] = ()
+    # Other sources (ids) whose value of the same field would explain the arrivals as well
+    # (a source scan's finding where these arrivals cannot tell which source's schedule is
+    # wrong, `run.method._scanned_schedules`).
+    other_sources: tuple[str, ...] = ()
 
     def as_json(self) -> dict[str, Any]:
         entry = {k: v for k, v in asdict(self).items() if v is not None or k in ("given", "supported", "sd", "line")}
-        if not self.alternatives:
-            del entry["alternatives"]
+        for empty in ("alternatives", "other_sources"):
+            if not entry[empty]:
+                del entry[empty]
         return entry
 
     def warning(self) -> str | None:
@@ -95,6 +100,9 @@ class MetadataCheck:
             supported = f"{_number(self.supported)} {self.unit} (sd {_number(self.sd)} {self.unit})"
         alternatives = " or ".join(f"'{a}'" for a in self.alternatives)
         unsure = f" (or its {alternatives} is wrong: these arrivals cannot tell which)" if alternatives else ""
+        if self.other_sources:
+            others = " or ".join(self.other_sources)
+            unsure += f" (or the '{self.field}' of {others} is wrong: these arrivals cannot tell which source's)"
         return (
             f"{where}: field '{self.field}' of {self.id}: given {given}; the arrivals support {supported}{unsure}; "
             "tracked with the arrivals' value"

@@ -4,31 +4,32 @@ of seconds off, an active period that ends too soon): where do its signals reall
 The Kalman checks (`metadata_checks`) see a source only through the arrivals a pass
 labelled to it; a source whose table puts its signals tens or hundreds of seconds from
 where they arrive has none: its signals are labelled clutter, and it is never checked.
-From a pass's track, every stored TOA of every window is compared with each source's
-predicted arrival time (table values, the calibrated clock): the residuals r = T - mu of a
-source's own signals pile up at one value, its offset error, while other sources' signals
-(those within `EXPLAINED_S` of another active source's prediction are left out) and
-clutter spread over the window. Per source, the windows with a residual within `MATCH_S`
-of d are counted, N(d), over the candidate offsets d on a grid of `MATCH_S` / 2; the best d
-beyond `[checks] offset_tolerance_s`, with N(d) >= `MIN_HITS` and N(d) > 2 N(0), is the
-source's candidate offset (the table's plus the median residual of its hits). Its active
-period likewise: hits at the (candidate) offset in windows outside the table's period, at
-least `MIN_HITS` and beyond what clutter gives by `CANDIDATE_Z` Poisson sds, make the
-first (last) hit a candidate start (end).
+From a calibrated pass's track, every stored TOA of every window is compared with each
+source's predicted arrival time (the calibration's timing and clock): the residuals
+r = T - mu of a source's own signals pile up at one value, its offset error, while other
+sources' signals (those within `EXPLAINED_S` of another active source's prediction are
+left out) and clutter spread over the window. Per source, the windows with a residual
+within `MATCH_S` of d are counted, N(d), over the candidate offsets d on a grid of
+`MATCH_S` / 2; the best d beyond `[checks] offset_tolerance_s`, with N(d) >= `MIN_HITS`
+and N(d) > 2 N(0), is the source's candidate offset (the calibrated offset plus the median
+residual of its hits). Its active period likewise: hits at the (candidate) offset in
+windows outside the table's period, at least `MIN_HITS` and beyond what clutter gives by
+`CANDIDATE_Z` Poisson sds, make the first (last) hit a candidate start (end).
 
 A pile can be chance (clutter, or signals of another source the track does not place
 right), so a candidate is weighed by the tracker's own model: the record's log-likelihood
-at the track's positions, association summed out, misses and clutter included (the first
-pass's TOA noise, the configured detection), with the candidate's schedule against the
-table's,
+at the track's positions, association summed out, misses and clutter included (the
+calibrated model, each source's detection as fitted: under a flat detection law, moving a
+far source that is rarely heard to a late time, past what the float stores, would gain
+from its misses alone), with the candidate's schedule against the calibration's,
 
-    gain = sum_w log p(T_w | x_w, candidate) - sum_w log p(T_w | x_w, table),
+    gain = sum_w log p(T_w | x_w, candidate) - sum_w log p(T_w | x_w, calibration),
 
 and only candidates gaining more than `MIN_GAIN_NATS` are returned, strongest first. A
 chance pile gains where it hits and loses wherever the moved source is due and not heard.
 The gain holds the track fixed, and a track pulled by one wrong source makes others look
-shifted: the method (`run.method`) therefore tracks the record again with the strongest
-candidate and keeps it only where the whole record's evidence rises.
+shifted: the method (`run.method._scanned_schedules`) therefore tracks the record again
+with the strongest candidates and keeps one only where the whole record's evidence rises.
 """
 
 from __future__ import annotations
@@ -144,15 +145,17 @@ class ScheduleCandidate:
 
 
 def schedule_candidates(
-    problem: FloatProblem, estimate: Estimate, record: ArrivalRecord, clock: FloatInfo
+    table: FloatProblem, calibrated: FloatProblem, estimate: Estimate, record: ArrivalRecord
 ) -> list[ScheduleCandidate]:
-    """Each source's candidate schedule along `estimate`'s track (module docstring), `clock`
-    the float's description with its calibrated clock: those gaining more than
-    `MIN_GAIN_NATS`, strongest first."""
-    beacons, info, config = problem.beacons, problem.info, problem.config
-    window_s = info.window_s
+    """Each source's candidate schedule along `estimate`'s track (module docstring), weighed
+    with the `calibrated` problem (the calibration's beacon table, with its timing
+    corrections and each source's fitted detection, its clock and model); the checks name
+    the values of `table` (the user's). Those gaining more than `MIN_GAIN_NATS`, strongest
+    first."""
+    beacons, config = calibrated.beacons, calibrated.config
+    window_s = calibrated.info.window_s
     found = []
-    for row, res in enumerate(_residuals(record, estimate.track, beacons, clock, config.model)):
+    for row, res in enumerate(_residuals(record, estimate.track, beacons, calibrated.info, config.model)):
         if res.active.sum() < MIN_HITS:
             continue
         shift, count = _best_shift(res, window_s)
@@ -161,30 +164,27 @@ def schedule_candidates(
         checks = []
         if moved:
             near = np.abs(res.residual_s - shift) <= MATCH_S
-            checks.append(_offset_check(beacons, row, float(np.median(res.residual_s[near]))))
-        checks += _period_checks(beacons, row, res, shift if moved else 0.0, window_s)
+            supported = float(beacons.offset_s[row]) + float(np.median(res.residual_s[near]))
+            checks.append(_offset_check(table.beacons, row, supported))
+        checks += _period_checks(table.beacons, row, res, shift if moved else 0.0, window_s)
         if checks:
             found.append(checks)
     if not found:
         return []
-    table = _record_loglik(problem, beacons, estimate, record, clock)
+    before = _record_loglik(calibrated, estimate, record)
     candidates = []
     for checks in found:
-        gain = float(_record_loglik(problem, with_supported_schedule(beacons, checks), estimate, record, clock) - table)
+        moved_problem = dataclasses.replace(calibrated, beacons=with_supported_schedule(beacons, checks))
+        gain = _record_loglik(moved_problem, estimate, record) - before
         if gain > MIN_GAIN_NATS:
             candidates.append(ScheduleCandidate(checks, round(gain, 1)))
     return sorted(candidates, key=lambda c: c.gain_nats, reverse=True)
 
 
-def _record_loglik(
-    problem: FloatProblem, beacons: BeaconTable, estimate: Estimate, record: ArrivalRecord, clock: FloatInfo
-) -> float:
-    """The record's log-likelihood at the track's positions under `beacons`: the ranked
-    model with the first pass's TOA noise and the configured detection."""
-    config = problem.config
-    sigma = max(config.model.toa_sigma_s, config.calibrate.first_pass_toa_sigma_s)
+def _record_loglik(problem: FloatProblem, estimate: Estimate, record: ArrivalRecord) -> float:
+    """The record's log-likelihood at the track's positions under `problem` (the ranked model)."""
     likelihood = arrivals_from_config(
-        beacons, clock, with_overrides(config, filter={"likelihood": "ranked"}, model={"toa_sigma_s": sigma})
+        problem.beacons, problem.info, with_overrides(problem.config, filter={"likelihood": "ranked"})
     )
     at = estimate.track.set_index("time")
     windows = [w for w in record.windows if w.time in at.index]
@@ -196,11 +196,10 @@ def _record_loglik(
     )  # fmt: skip
 
 
-def _offset_check(beacons: BeaconTable, row: int, shift_s: float) -> MetadataCheck:
+def _offset_check(beacons: BeaconTable, row: int, supported_s: float) -> MetadataCheck:
     file, line, name = beacon_source(beacons, row)
-    given = float(beacons.offset_s[row])
-    return MetadataCheck(file, line, name, "offset_s", given, round(given + shift_s, 3), MATCH_S, "s", CONTRADICTED,
-                         used=round(given + shift_s, 3))  # fmt: skip
+    given, supported = float(beacons.offset_s[row]), round(supported_s, 3)
+    return MetadataCheck(file, line, name, "offset_s", given, supported, MATCH_S, "s", CONTRADICTED, used=supported)
 
 
 def _period_checks(

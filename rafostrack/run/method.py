@@ -45,6 +45,7 @@ from .one_pass import Tracker, TrackOutput
 # with the same labels (docs/decisions.md).
 CALIBRATION_COLUMNS = 512
 MAX_SCHEDULE_FINDINGS = 4  # sources whose schedule the scan corrects at most (`_scanned_schedules`)
+SCHEDULE_TRIALS = 3  # candidates tracked again per scan (`_scanned_schedules`)
 
 PassProgress = Callable[[int], Callable[[int, int], None] | None]  # pass number -> its progress callback
 
@@ -163,8 +164,8 @@ class _CalibratingPasses:
 def _calibrating_passes(problem: FloatProblem, record: ArrivalRecord, told: PassProgress) -> _CalibratingPasses:
     """Steps 1-2 and the passes between calibrations: the robust first pass, then
     `[calibrate] iterations` calibrations, each but the last followed by a pass with it. The
-    first calibration's clock and the first pass's track feed the source scan
-    (`_scanned_schedules`), which may correct the beacon table and the first pass."""
+    pass after the first calibration feeds the source scan (`_scanned_schedules`), which may
+    correct the beacon table, that pass and the calibration."""
     config = problem.config
     out = _first_pass(problem).track(record, progress=told(1))
     spent = {"filter_s": out.filter_s, "smoother_s": out.smoother_s, "calibrate_s": 0.0}
@@ -175,17 +176,13 @@ def _calibrating_passes(problem: FloatProblem, record: ArrivalRecord, told: Pass
         start = calibration.hyper if calibration is not None else None
         fitted = calibrate(out.estimate, record, problem, start=start)
         spent["calibrate_s"] += time.perf_counter() - started
-        if fitted is not None and iteration == 0 and config.checks.enabled and config.checks.source_scan:
-            problem, out, fitted, scanned = _scanned_schedules(problem, record, out, fitted, spent)
         if fitted is None:
             break
         calibration = fitted
         if iteration < config.calibrate.iterations - 1:
-            calibrated = calibration.calibrated(problem.with_config(calibration_pass(config)))
-            tracker = _feeding_calibration(Tracker.from_problem(calibrated))
-            out = tracker.track(record, extra_cov=calibration.nuisance_cov_at, progress=told(iteration + 2))
-            spent["filter_s"] += out.filter_s
-            spent["smoother_s"] += out.smoother_s
+            out = _calibrated_pass(problem, calibration, record, spent, told(iteration + 2))
+            if iteration == 0 and config.checks.enabled and config.checks.source_scan:
+                problem, out, calibration, scanned = _scanned_schedules(problem, record, calibration, out, spent)
     return _CalibratingPasses(calibration, problem, scanned, spent)
 
 
@@ -195,43 +192,72 @@ def _first_pass(problem: FloatProblem) -> Tracker:
     return _clock_in_state(_feeding_calibration(Tracker.from_problem(robust)), problem.config)
 
 
+def _calibrated_pass(
+    problem: FloatProblem,
+    calibration: Calibration,
+    record: ArrivalRecord,
+    spent: dict[str, float],
+    progress: Callable[[int, int], None] | None = None,
+    checks: list[MetadataCheck] | None = None,
+) -> TrackOutput:
+    """A pass that feeds calibration, tracked with `calibration` (the beacon table with
+    the schedule of `checks` where given: a source scan's candidate); `spent` adds its
+    seconds."""
+    calibrated = calibration.calibrated(problem.with_config(calibration_pass(problem.config)))
+    if checks:
+        calibrated = dataclasses.replace(calibrated, beacons=with_supported_schedule(calibrated.beacons, checks))
+    out = _feeding_calibration(Tracker.from_problem(calibrated)).track(
+        record, extra_cov=calibration.nuisance_cov_at, progress=progress
+    )
+    spent["filter_s"] += out.filter_s
+    spent["smoother_s"] += out.smoother_s
+    return out
+
+
 def _scanned_schedules(
-    problem: FloatProblem, record: ArrivalRecord, out: TrackOutput, fitted: Calibration, spent: dict[str, float]
+    problem: FloatProblem, record: ArrivalRecord, calibration: Calibration, out: TrackOutput, spent: dict[str, float]
 ) -> tuple[FloatProblem, TrackOutput, Calibration, list[MetadataCheck]]:
     """Sources whose schedule in the table the arrivals contradict (`calibrate.source_scan`),
-    one at a time: the strongest candidate along the first pass's track is tried by tracking
-    the record again with it, and kept where the record's evidence (the filter's sum of
-    log p(y_t | y_1..t-1) over the windows) rises by more than `[checks] z_score`^2 / 2 (the
-    likelihood-ratio counterpart of z sds); the corrected table is then calibrated and
-    scanned again, each source once. The problem, first pass and calibration to go on
-    with, and the contradicted values kept. `spent` adds the trials' seconds."""
+    one at a time: the `SCHEDULE_TRIALS` strongest candidates along the track of `out` (a
+    pass tracked with `calibration`), each a different source, are tried by tracking the
+    record again with the same calibration and the candidate's schedule; the one whose
+    trial raises the record's evidence (the filter's sum of log p(y_t | y_1..t-1) over the
+    windows) most, by more than `[checks] z_score`^2 / 2 (the likelihood-ratio counterpart
+    of z sds), is kept. Another candidate within that margin of it explains the arrivals
+    as well: the finding names its source too (`MetadataCheck.other_sources`: the arrivals
+    cannot tell which source's schedule is wrong). The corrected table is then calibrated,
+    tracked and scanned again, each source at most once. The problem, pass and
+    calibration to go on with, and the contradicted values kept. `spent` adds the seconds."""
     threshold = problem.config.checks.z_score**2 / 2
     found: list[MetadataCheck] = []
+    done: set[str] = set()  # the sources a finding named
     for _ in range(MAX_SCHEDULE_FINDINGS):
         started = time.perf_counter()
-        corrected = {c.id for c in found}  # a source's schedule is corrected once
         candidates = [
             c
-            for c in schedule_candidates(problem, out.estimate, record, fitted.info)
-            if not corrected & {check.id for check in c.checks}
+            for c in schedule_candidates(problem, calibration.calibrated(problem), out.estimate, record)
+            if not done & {check.id for check in c.checks}
         ]
         spent["calibrate_s"] += time.perf_counter() - started
-        if not candidates:
+        tried_candidates = candidates[:SCHEDULE_TRIALS]
+        trials = [_calibrated_pass(problem, calibration, record, spent, checks=c.checks) for c in tried_candidates]
+        gains = [_record_evidence(trial) - _record_evidence(out) for trial in trials]
+        if not gains or max(gains) <= threshold:
             break
-        tried = dataclasses.replace(problem, beacons=with_supported_schedule(problem.beacons, candidates[0].checks))
-        trial = _first_pass(tried).track(record)
-        spent["filter_s"] += trial.filter_s
-        spent["smoother_s"] += trial.smoother_s
-        if _record_evidence(trial) - _record_evidence(out) <= threshold:
-            break
+        best = int(np.argmax(gains))
+        close = [k for k in range(len(gains)) if k != best and gains[best] - gains[k] <= threshold]
+        others = tuple(tried_candidates[k].checks[0].id for k in close)
+        checks = [dataclasses.replace(check, other_sources=others) for check in tried_candidates[best].checks]
         started = time.perf_counter()
-        refitted = calibrate(trial.estimate, record, tried, start=fitted.hyper)
+        tried = dataclasses.replace(problem, beacons=with_supported_schedule(problem.beacons, checks))
+        refitted = calibrate(trials[best].estimate, record, tried, start=calibration.hyper)
         spent["calibrate_s"] += time.perf_counter() - started
         if refitted is None:
             break
-        problem, out, fitted = tried, trial, refitted
-        found += candidates[0].checks
-    return problem, out, fitted, found
+        problem, calibration, found = tried, refitted, found + checks
+        done |= {check.id for check in checks} | set(others)
+        out = _calibrated_pass(problem, calibration, record, spent)
+    return problem, out, calibration, found
 
 
 def _record_evidence(out: TrackOutput) -> float:

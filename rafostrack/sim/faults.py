@@ -315,14 +315,16 @@ def _contradicted(checks: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def names(check: dict[str, Any], fault: InjectedFault) -> bool:
     """Whether a metadata_checks entry names `fault` (same file, id and field, or a field of
-    the same row whose entry names the fault's as its alternative; contradicted, or for a
-    value left empty, reported as estimated or undetermined with no value given)."""
+    the same row whose entry names the fault's as its alternative, or the same field of a
+    source whose entry names the fault's source among its `other_sources`; contradicted, or
+    for a value left empty, reported as estimated or undetermined with no value given)."""
     missing = fault.written is None and check.get("given") is None
     fields = [check.get("field"), *check.get("alternatives", ())]
+    ids = [str(check.get("id")), *(str(i) for i in check.get("other_sources", ()))]
     return (
         (check.get("outcome") == "contradicted" or (missing and check.get("outcome") in ("estimated", "undetermined")))
         and Path(str(check.get("file"))).name == fault.file
-        and str(check.get("id")) == fault.id
+        and fault.id in ids
         and any(field in naming_fields(fault) for field in fields)
     )
 
