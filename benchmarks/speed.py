@@ -4,8 +4,9 @@ Prints, per method and particle count, the time of the whole method (all its pas
 the robust pass, calibration, the calibrated passes), split into filter, smoother (backward
 pass plus smoothed labels and summaries) and calibration (the Kalman fit and association
 EM), with the track's RMSE against the sample's truth, the labels right and the median ESS
-of the last pass; `--profile` prints the top functions by cumulative time (cProfile), for
-finding what to optimise. Run on one core (`OMP_NUM_THREADS=1 taskset -c 0`) for figures
+of the last pass; `--profile` then prints, per pass and calibration, the seconds of each
+stage of the method (motion, ranges, association, smoother, ...: `stages.py`), for finding
+what to optimise. Run on one core (`OMP_NUM_THREADS=1 taskset -c 0`) for figures
 that do not depend on what else runs.
 
     python benchmarks/speed.py [--methods exact bp] [--particles 1000 10000] [--config FILE] [--profile]
@@ -18,14 +19,13 @@ that do not depend on what else runs.
 from __future__ import annotations
 
 import argparse
-import cProfile
-import pstats
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from report import machine, markdown_table, write_section
+from stages import stage_table
 
 from rafostrack.config import method_overrides, with_overrides
 from rafostrack.run.method import track_record
@@ -60,13 +60,8 @@ def main() -> None:
     for method in args.methods:
         for particles in args.particles:
             config = with_overrides(loaded.problem.config, filter={**method_overrides(method), "particles": particles})
-            profiler = cProfile.Profile() if args.profile else None
             started = time.perf_counter()
-            if profiler:
-                profiler.enable()
             out = track_record(loaded.problem.with_config(config), loaded.record)
-            if profiler:
-                profiler.disable()
             elapsed = time.perf_counter() - started
             rows.append(_row(method, particles, elapsed, out, truth, loaded))
             print(
@@ -76,8 +71,11 @@ def main() -> None:
                 f"{np.median(out.filter_ess) / particles:6.2f}",
                 flush=True,
             )
-            if profiler:
-                pstats.Stats(profiler).sort_stats("cumulative").print_stats(15)
+            if args.profile:
+                problem = loaded.problem.with_config(config)
+                table = stage_table(lambda: track_record(problem, loaded.record))  # noqa: B023
+                print(f"\nseconds per call and stage ({method}, {particles} particles; stages.py):")
+                print(table.to_string(index=False, float_format=lambda x: f"{x:.2f}"), "\n", flush=True)
     if args.report:
         write_section(args.report, "speed", _report(header, pd.DataFrame(rows)))
 
