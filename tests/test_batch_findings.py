@@ -119,6 +119,22 @@ def test_a_minority_contradiction_says_so_and_long_lists_are_cut():
     assert strong.row()["contradicting_floats"] == "f0;f1;f2;f3;f4;f5;f6"
 
 
+def test_what_the_floats_arrivals_would_blame_as_well_is_named_once_for_the_source():
+    """Two floats contradict source B3's offset; each one's arrivals would blame as well
+    another source's offset (a scan's finding) or B3's position: the finding names every
+    one of them, once, in its line and in the CSV."""
+    first = {**_offset(90.0, "contradicted"), "other_sources": ["B4"], "alternatives": ["lat"]}
+    second = {**_offset(91.0, "contradicted"), "other_sources": ["B7", "B4"]}
+    [finding] = mission_findings("dimes", [*_checks("f1", first), *_checks("f2", second)])
+    assert (finding.alternatives, finding.other_sources) == (("lat",), ("B4", "B7"))
+    assert finding.message() == (
+        "mission dimes: beacons.csv line 5: field 'offset_s' of source B3: given 120.0 s; the arrivals support "
+        "90.5 s (or its 'lat' is wrong: these arrivals cannot tell which) (or the 'offset_s' of B4 or B7 is "
+        "wrong: these arrivals cannot tell which source's) on 2 of 2 floats that hear it (f1, f2)"
+    )
+    assert (finding.row()["alternatives"], finding.row()["other_sources"]) == ("lat", "B4;B7")
+
+
 def test_floats_table_findings_are_one_per_float():
     checks = [
         *_checks("float767", _clock("float767", 4, -12.0, 11.8, "contradicted"), _offset(120.0, "consistent")),
@@ -320,6 +336,8 @@ def test_the_csv_and_the_printed_lines(tmp_path):
             "pooled": "",  # these runs name no [checks] settings: nothing to judge a pool by
             "pooled_sd": "",
             "pooled_outcome": "",
+            "alternatives": "",
+            "other_sources": "",
         },
         {
             "mission": "dimes",
@@ -341,6 +359,8 @@ def test_the_csv_and_the_printed_lines(tmp_path):
             "pooled": "",  # these runs name no [checks] settings: nothing to judge a pool by
             "pooled_sd": "",
             "pooled_outcome": "",
+            "alternatives": "",
+            "other_sources": "",
         },
     ]
     assert stream.getvalue().splitlines() == [

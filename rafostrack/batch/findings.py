@@ -39,7 +39,7 @@ from datetime import UTC, datetime
 from pathlib import Path, PurePath
 from typing import Any
 
-from ..calibrate.metadata_checks import CONTRADICTED, outcome_of
+from ..calibrate.metadata_checks import CONTRADICTED, outcome_of, undecided_note
 from ..io.writers import csv_text
 from .plan import FAILED, SKIPPED, FloatOutcome
 
@@ -64,6 +64,8 @@ FINDINGS_COLUMNS = (
     "pooled",
     "pooled_sd",
     "pooled_outcome",
+    "alternatives",
+    "other_sources",
 )
 # The pooled fields and the [checks] tolerance that judges each.
 POOLED_TOLERANCE = {"offset_s": "offset_tolerance_s", "drift_s_per_day": "drift_tolerance_s_per_day"}
@@ -92,6 +94,8 @@ class Check:
     sd: float | None = None  # the sd of the float's arrivals' value
     tolerance: float | None = None  # the run's [checks] tolerance and z-score for the field
     z_score: float | None = None
+    alternatives: tuple[str, ...] = ()  # other fields of the row the arrivals would blame as well
+    other_sources: tuple[str, ...] = ()  # other sources whose same field they would blame as well
 
     @property
     def key(self) -> tuple[str, str, str]:
@@ -127,6 +131,8 @@ class Finding:
     given_lat_lon: LatLon = None  # positions (fixes, sources): the table's
     supported_lat_lon: LatLon = None  # and the median latitude and longitude the arrivals support
     pooled: Pooled | None = None  # a source's offset or drift on every float's arrivals together
+    alternatives: tuple[str, ...] = ()  # what the contradicting floats' arrivals would blame as well
+    other_sources: tuple[str, ...] = ()
 
     def row(self) -> dict[str, Any]:
         """One row of metadata-findings.csv."""
@@ -150,6 +156,8 @@ class Finding:
             pooled="" if self.pooled is None else self.pooled.value,
             pooled_sd="" if self.pooled is None else self.pooled.sd,
             pooled_outcome="" if self.pooled is None else self.pooled.outcome,
+            alternatives=";".join(self.alternatives),
+            other_sources=";".join(self.other_sources),
         )
 
     def message(self) -> str:
@@ -165,7 +173,8 @@ class Finding:
                 f"mission {self.mission}: {where}: {what}: given {given}; the arrivals of the {self.n_checked} floats "
                 f"that hear it support {pooled} together (none alone is sure)"
             )
-        text = f"mission {self.mission}: {where}: {what}: given {given}; the arrivals support {supported}"
+        unsure = undecided_note(self.field, self.alternatives, self.other_sources)
+        text = f"mission {self.mission}: {where}: {what}: given {given}; the arrivals support {supported}{unsure}"
         if not self.of_source:
             return text
         shown = ", ".join(self.contradicting[:_SHOWN_FLOATS])
@@ -231,6 +240,8 @@ def parse_checks(run: Mapping[str, Any], float_id: str) -> list[Check]:
                 sd=number(entry.get("sd")),
                 tolerance=number(settings.get(POOLED_TOLERANCE.get(str(entry["field"]), ""))),
                 z_score=number(settings.get("z_score")),
+                alternatives=_names(entry.get("alternatives")),
+                other_sources=_names(entry.get("other_sources")),
             )
         )
     return checks
@@ -249,6 +260,11 @@ def _value(value: Any) -> Value:
     if isinstance(value, int | float):
         return float(value)
     return str(value)
+
+
+def _names(value: Any) -> tuple[str, ...]:
+    """A JSON list of field or source names (anything else: none)."""
+    return tuple(str(v) for v in value) if isinstance(value, list | tuple) else ()
 
 
 def _lat_lon(value: Any) -> LatLon:
@@ -333,7 +349,14 @@ def _finding(mission: str, by_float: Mapping[str, Check], pooled: Pooled | None 
         given_lat_lon=first.given_lat_lon,
         supported_lat_lon=_median_lat_lon([c.supported_lat_lon for c in against]),
         pooled=pooled,
+        alternatives=_union(c.alternatives for c in against),
+        other_sources=_union(c.other_sources for c in against),
     )
+
+
+def _union(names: Iterable[tuple[str, ...]]) -> tuple[str, ...]:
+    """The names of every float's entry, each once, sorted."""
+    return tuple(sorted({name for some in names for name in some}))
 
 
 def _median_lat_lon(positions: Sequence[LatLon]) -> LatLon:

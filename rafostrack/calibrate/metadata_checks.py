@@ -28,6 +28,7 @@ value (tracks with the arrivals' value) is `calibrate.release`'s.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -98,15 +99,24 @@ class MetadataCheck:
         else:
             given = f"{_number(self.given)} {self.unit}"
             supported = f"{_number(self.supported)} {self.unit} (sd {_number(self.sd)} {self.unit})"
-        alternatives = " or ".join(f"'{a}'" for a in self.alternatives)
-        unsure = f" (or its {alternatives} is wrong: these arrivals cannot tell which)" if alternatives else ""
-        if self.other_sources:
-            others = " or ".join(self.other_sources)
-            unsure += f" (or the '{self.field}' of {others} is wrong: these arrivals cannot tell which source's)"
+        unsure = undecided_note(self.field, self.alternatives, self.other_sources)
         return (
             f"{where}: field '{self.field}' of {self.id}: given {given}; the arrivals support {supported}{unsure}; "
             "tracked with the arrivals' value"
         )
+
+
+def undecided_note(field: str, alternatives: Sequence[str], other_sources: Sequence[str]) -> str:
+    """What else the arrivals would blame as well, for a contradiction's message: ` (or its
+    'lat' or 'lon' is wrong: ...)`, ` (or the 'offset_s' of B4 is wrong: ...)`; empty if nothing."""
+    note = ""
+    if alternatives:
+        named = " or ".join(f"'{a}'" for a in alternatives)
+        note += f" (or its {named} is wrong: these arrivals cannot tell which)"
+    if other_sources:
+        named = " or ".join(other_sources)
+        note += f" (or the '{field}' of {named} is wrong: these arrivals cannot tell which source's)"
+    return note
 
 
 def z_of(check: MetadataCheck) -> float:
