@@ -95,8 +95,8 @@ def test_with_the_clock_in_the_state_a_wrong_end_clock_offset_does_not_move_the_
     model = dataclasses.replace(load_config().model, toa_sigma_s=1.0, clutter_rate=0.5)
     sim = simulate_mission(beacons, [true_info], model, np.random.default_rng(5)).floats[0]
     told = dataclasses.replace(true_info, clock_offset_end_s=0.0)
-    config = with_overrides(load_config(), filter={"particles": 500}, model={"toa_sigma_s": 1.0, "clutter_rate": 0.5})
-    tracker = Tracker.from_problem(FloatProblem(beacons, told, config))
+    config = with_overrides(load_config(), filter={"particles": 2000}, model={"toa_sigma_s": 1.0, "clutter_rate": 0.5})
+    tracker = Tracker.from_problem(FloatProblem(beacons, told, config))  # 500 particles: 3-20 km by filter seed
     clocked = dataclasses.replace(tracker, motion=ClockWalk(tracker.motion, 0.5, 0.5))
     errors, clock_errors = {}, []
     for name, t in (("table", tracker), ("clocked", clocked)):
@@ -112,5 +112,5 @@ def test_with_the_clock_in_the_state_a_wrong_end_clock_offset_does_not_move_the_
                 clock_errors.append(float(s.cloud.weights @ s.cloud.particles.clock_s) - true_correction)
     late = slice(-20, None)  # the last 20 windows: the true clock 27-40 s from the table's
     assert np.sqrt(np.mean(errors["table"][late] ** 2)) > 20.0  # 58 km here
-    assert np.sqrt(np.mean(errors["clocked"][late] ** 2)) < 5.0  # 2.9 km here
+    assert np.sqrt(np.mean(errors["clocked"][late] ** 2)) < 5.0  # 2.5-2.9 km over filter seeds 0-5
     assert np.sqrt(np.mean(np.square(clock_errors))) < 2.5  # 1.6 s here
