@@ -19,6 +19,7 @@ subset: 3 DIMES and 3 Weddell floats of 120 days at clutter rate 2.
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -117,7 +118,8 @@ def main() -> None:
     tasks = [(f, root / "out", engine, args.particles) for f in files for engine in ENGINES]
     started = time.perf_counter()
     if args.workers > 1:
-        with single_threaded_math(), ProcessPoolExecutor(args.workers) as pool:
+        context = multiprocessing.get_context("forkserver")  # fresh workers: numba single-threaded too
+        with single_threaded_math(), ProcessPoolExecutor(args.workers, mp_context=context) as pool:
             rows = list(pool.map(score, tasks))
     else:
         rows = [score(t) for t in tasks]

@@ -63,6 +63,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import multiprocessing
 import tempfile
 import time
 from collections.abc import Callable
@@ -418,7 +419,8 @@ def _output_root(args: argparse.Namespace) -> Path:
 def run_tasks(fn: Callable[[Any], Any], tasks: list, workers: int) -> list:
     """`fn` over `tasks`, in a pool of `workers` processes (single-threaded maths) when more than 1."""
     if workers > 1:
-        with single_threaded_math(), ProcessPoolExecutor(workers) as pool:
+        context = multiprocessing.get_context("forkserver")  # fresh workers: numba single-threaded too
+        with single_threaded_math(), ProcessPoolExecutor(workers, mp_context=context) as pool:
             return list(pool.map(fn, tasks))
     return [fn(t) for t in tasks]
 

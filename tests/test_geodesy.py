@@ -8,7 +8,16 @@ import numpy as np
 import pytest
 from geographiclib.geodesic import Geodesic
 
-from rafostrack.model.geodesy import displace, local_offsets_km, range_m, range_matrix_m, wrap_lon
+from rafostrack.model.geodesy import (
+    EXPANSION_TOLERANCE_M,
+    MIN_EXPANDED,
+    displace,
+    local_offsets_km,
+    range_m,
+    range_matrix_m,
+    ranges_about_centre_m,
+    wrap_lon,
+)
 
 
 def test_ranges_match_geographiclib_within_10m_up_to_3000km():
@@ -86,3 +95,27 @@ def test_wrap_lon():
     assert np.allclose(wrap_lon([180.0, -180.0, 190.0, 359.0, -181.0]), [-180.0, -180.0, -170.0, -1.0, 179.0])
     assert np.allclose(wrap_lon([-180.0, 0.1, 179.9]), [-180.0, 0.1, 179.9])  # all in range: no remainder taken
     assert wrap_lon(540.0) == -180.0 and wrap_lon(-10.0) == pytest.approx(-10.0)
+
+
+def test_ranges_about_a_centre_are_within_the_tolerance_of_the_exact_formula_and_geographiclib():
+    """The expansion about a cloud's centre (`ranges_about_centre_m`): within
+    `EXPANSION_TOLERANCE_M` of the exact formula for clouds of 1-100 km sd at latitudes up
+    to 75 degrees and far points 20-2500 km away, and within that plus the formula's own
+    10 m of GeographicLib; a handful of points take the exact formula itself."""
+    rng = np.random.default_rng(5)
+    worst_exact, worst_karney = 0.0, 0.0
+    for _ in range(60):
+        lat0, lon0, sd = rng.uniform(-75, 75), rng.uniform(-180, 180), rng.choice([1.0, 5.0, 20.0, 100.0])
+        lat, lon = displace(np.full(500, lat0), np.full(500, lon0), rng.normal(0, sd, 500), rng.normal(0, sd, 500))
+        bearing, distance = rng.uniform(0, 360, 6), rng.uniform(20e3, 2500e3, 6)
+        far = [Geodesic.WGS84.Direct(lat0, lon0, b, d) for b, d in zip(bearing, distance, strict=True)]
+        far_lat, far_lon = np.array([f["lat2"] for f in far]), np.array([f["lon2"] for f in far])
+        expanded = ranges_about_centre_m(lat, lon, far_lat, far_lon)
+        worst_exact = max(worst_exact, float(np.abs(expanded - range_matrix_m(lat, lon, far_lat, far_lon)).max()))
+        for p in rng.choice(500, 5, replace=False):
+            for i in range(6):
+                karney = Geodesic.WGS84.Inverse(lat[p], lon[p], far_lat[i], far_lon[i])["s12"]
+                worst_karney = max(worst_karney, abs(expanded[p, i] - karney))
+    assert worst_exact < EXPANSION_TOLERANCE_M and worst_karney < EXPANSION_TOLERANCE_M + 10.0
+    few = ranges_about_centre_m(lat[: MIN_EXPANDED - 1], lon[: MIN_EXPANDED - 1], far_lat, far_lon)
+    assert np.array_equal(few, range_matrix_m(lat[: MIN_EXPANDED - 1], lon[: MIN_EXPANDED - 1], far_lat, far_lon))

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import dataclasses
 
+import numba
 import numpy as np
+import pandas as pd
 import pytest
 
 from rafostrack.config import METHODS, load_config, method_overrides, with_overrides
@@ -182,3 +184,23 @@ def test_tables_without_rows_keep_their_column_types(sim_mission, tmp_path):
     write_parquet(empty.modes, tmp_path / "modes.parquet", {}, "modes")
     schema = pq.read_schema(tmp_path / "modes.parquet")
     assert [str(schema.field(c).type) for c in ("lat", "lon", "weight", "sd_km")] == ["double"] * 4
+
+
+def test_results_do_not_depend_on_the_thread_count(sim_mission):
+    """The compiled kernels run particles (and the smoother's rows) in parallel, each on its
+    own, so one thread and all of them give the same bits: the whole method (calibration,
+    smoothing, labels) with 1000 particles."""
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one core: nothing to compare")
+    sim = sim_mission.floats[0]
+    problem = FloatProblem(sim_mission.beacons, sim.info, with_overrides(load_config(), filter={"particles": 1000}))
+    outputs = []
+    for threads in (1, numba.config.NUMBA_NUM_THREADS):
+        numba.set_num_threads(threads)
+        try:
+            outputs.append(track_record(problem, sim.record))
+        finally:
+            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    one, many = outputs
+    pd.testing.assert_frame_equal(one.track, many.track, check_exact=True)
+    pd.testing.assert_frame_equal(one.labels, many.labels, check_exact=True)

@@ -35,6 +35,7 @@ from ..io.outdir import staging_dir, swap_into_place
 from ..io.writers import write_json
 from .lock import read_lock_info
 from .plan import FAILED, MANIFEST, MANIFEST_FORMAT, PROCESSED, FloatOutcome, FloatTask
+from .workers import one_kernel_thread
 
 
 def process_float(task: FloatTask) -> FloatOutcome:
@@ -52,7 +53,8 @@ def process_float(task: FloatTask) -> FloatOutcome:
         if staging.exists():
             shutil.rmtree(staging)
         inputs = TrackInputs(float_path=task.float_path, config_files=task.config_files, overrides=task.overrides)
-        result = track_float(inputs, staging, plots=task.plots)
+        with one_kernel_thread():
+            result = track_float(inputs, staging, plots=task.plots)
         built = Path(result.out_dir)
         files = {p.name: p.stat().st_size for p in sorted(built.iterdir()) if p.is_file()}
         manifest = {

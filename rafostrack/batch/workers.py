@@ -1,9 +1,11 @@
 """Worker processes that share the machine instead of oversubscribing it.
 
-Every worker process that starts its own multi-threaded math library (BLAS, OpenMP) takes a
-thread per core: N such workers on N cores run slower than one. Pools (batch `--jobs`, the
-experiments) start their workers inside `single_threaded_math()`. Results do not depend on
-this: the package's reductions avoid BLAS, so they are the same for any thread count.
+Every worker process that starts its own multi-threaded math library (BLAS, OpenMP, numba's
+parallel kernels) takes a thread per core: N such workers on N cores run slower than one.
+Pools (batch `--jobs`, the experiments) start their workers inside `single_threaded_math()`,
+by spawn or forkserver (a forked worker keeps its parent's numba threads). Results do not
+depend on this: the package's reductions avoid BLAS, and its parallel kernels give every
+particle its own arithmetic, so they are the same for any thread count.
 """
 
 from __future__ import annotations
@@ -12,7 +14,15 @@ import contextlib
 import os
 from collections.abc import Iterator
 
-MATH_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+# NUMBA_NUM_THREADS: the compiled kernels' own threads (read when numba is imported: a worker
+# started by spawn or forkserver, as the batch's are, imports it afresh).
+MATH_THREAD_VARS = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMBA_NUM_THREADS",
+)
 
 
 @contextlib.contextmanager
@@ -37,3 +47,17 @@ def single_threaded_math() -> contextlib.AbstractContextManager[None]:
     """While worker processes start, set the math libraries' thread counts to 1 in the
     environment they inherit, unless the user set them."""
     return environment(dict.fromkeys(MATH_THREAD_VARS, "1"), keep_existing=True)
+
+
+@contextlib.contextmanager
+def one_kernel_thread() -> Iterator[None]:
+    """Run the compiled kernels on this thread alone for the duration (one float per core:
+    a batch task, on a local worker or a Dask one), then as before."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 LANES = 32
 RESCALE_ABOVE = 1e150
@@ -122,16 +122,37 @@ def associate_kernel(
     """Fill log_z (P,) (log Z less sum_i log u_i), and with `marginals` p_match and p_echo
     (P, s, K), from log w_ij (P, s, K), log u_i (P, s) and the echo pairs (j, j') with their
     log E_jj' (1 or P, pairs: shared, or per particle); each beacon's factors are divided by
-    u_i (module docstring of `exact`)."""
+    u_i (module docstring of `exact`). Block by block of `LANES` particles, each with its
+    own tables (`_associate_block`)."""
+    pair_e = np.exp(log_e)
+    for p0 in range(0, log_match.shape[0], LANES):
+        _associate_block(log_match, log_unheard, pair_j, pair_jj, log_e, pair_e, marginals, p0, log_z, p_match, p_echo)
+
+
+@njit(cache=True, nogil=True, boundscheck=False, parallel=True)
+def associate_kernel_threaded(
+    log_match, log_unheard, pair_j, pair_jj, log_e, marginals, log_z, p_match, p_echo
+):  # pragma: no cover
+    """`associate_kernel` on numba's threads, a block each (`model.parallel`)."""
+    pair_e = np.exp(log_e)
+    for block in prange((log_match.shape[0] + LANES - 1) // LANES):
+        p0 = np.intp(block) * LANES
+        _associate_block(log_match, log_unheard, pair_j, pair_jj, log_e, pair_e, marginals, p0, log_z, p_match, p_echo)
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
+def _associate_block(
+    log_match, log_unheard, pair_j, pair_jj, log_e, pair_e, marginals, p0, log_z, p_match, p_echo
+):  # pragma: no cover
+    """`associate_kernel` on the block of particles from p0 (its own tables)."""
     n, s, k = log_match.shape
     shared = log_e.shape[0] == 1
     n_masks = 1 << k
     n_pairs = pair_j.shape[0]
-    pair_e = np.exp(log_e)
     w = np.empty((s, k, LANES))
     pw = np.empty((s, n_pairs, LANES))
-    fwd = np.empty((s + 1, n_masks, LANES))
-    fwd_log = np.empty((s + 1, LANES))
+    fwd = np.empty((s + 1 if marginals else 1, n_masks, LANES))
+    fwd_log = np.empty((s + 1 if marginals else 1, LANES))
     bwd = np.empty((n_masks, LANES))
     bwd_log = np.empty(LANES)
     bound = np.empty(LANES)
@@ -139,83 +160,82 @@ def associate_kernel(
     active = np.empty((s, k), dtype=np.bool_)
     active_pair = np.empty((s, n_pairs), dtype=np.bool_)
     heard = np.empty(s, dtype=np.bool_)  # beacon i has a term above 1e-300 in the block
-    for p0 in range(0, n, LANES):
-        nl = min(LANES, n - p0)
-        _weights(log_match, log_unheard, p0, nl, pair_j, pair_e, w, pw, active, active_pair)
-        for i in range(s):
-            heard[i] = active[i].any() or active_pair[i].any()
-        for m in range(n_masks):
-            for lane in range(nl):
-                fwd[0, m, lane] = 0.0
+    nl = min(LANES, n - p0)
+    _weights(log_match, log_unheard, p0, nl, pair_j, pair_e, w, pw, active, active_pair)
+    for i in range(s):
+        heard[i] = active[i].any() or active_pair[i].any()
+    for m in range(n_masks):
         for lane in range(nl):
-            fwd[0, 0, lane] = 1.0
-            fwd_log[0, lane] = 0.0
-            bound[lane] = 1.0
-        for i in range(s):
-            table = fwd[i + 1] if marginals else fwd[0]
-            if marginals:
-                for m in range(n_masks):
-                    for lane in range(nl):
-                        table[m, lane] = fwd[i, m, lane]
-            log_scale = fwd_log[i + 1] if marginals else fwd_log[0]
-            if marginals:
-                for lane in range(nl):
-                    log_scale[lane] = fwd_log[i, lane]
-            if heard[i]:  # else F_i = F_{i-1} and the bound does not grow: nothing to do
-                _forward_stage(w, pw, i, k, pair_j, pair_jj, nl, table, active, active_pair)
-                _bound_step(w, pw, i, nl, table, bound, log_scale)
-        last = fwd[s] if marginals else fwd[0]
-        last_log = fwd_log[s] if marginals else fwd_log[0]
-        for lane in range(nl):
-            acc = 0.0
+            fwd[0, m, lane] = 0.0
+    for lane in range(nl):
+        fwd[0, 0, lane] = 1.0
+        fwd_log[0, lane] = 0.0
+        bound[lane] = 1.0
+    for i in range(s):
+        table = fwd[i + 1] if marginals else fwd[0]
+        if marginals:
             for m in range(n_masks):
-                acc += last[m, lane]
-            total[lane] = last_log[lane] + math.log(acc)
-            log_z[p0 + lane] = total[lane]
-        if not marginals:
-            continue
+                for lane in range(nl):
+                    table[m, lane] = fwd[i, m, lane]
+        log_scale = fwd_log[i + 1] if marginals else fwd_log[0]
+        if marginals:
+            for lane in range(nl):
+                log_scale[lane] = fwd_log[i, lane]
+        if heard[i]:  # else F_i = F_{i-1} and the bound does not grow: nothing to do
+            _forward_stage(w, pw, i, k, pair_j, pair_jj, nl, table, active, active_pair)
+            _bound_step(w, pw, i, nl, table, bound, log_scale)
+    last = fwd[s] if marginals else fwd[0]
+    last_log = fwd_log[s] if marginals else fwd_log[0]
+    for lane in range(nl):
+        acc = 0.0
         for m in range(n_masks):
-            for lane in range(nl):
-                bwd[m, lane] = 1.0
+            acc += last[m, lane]
+        total[lane] = last_log[lane] + math.log(acc)
+        log_z[p0 + lane] = total[lane]
+    if not marginals:
+        return
+    for m in range(n_masks):
         for lane in range(nl):
-            bwd_log[lane] = 0.0
-            bound[lane] = 1.0
-        for i in range(s - 1, -1, -1):
-            # Marginals of beacon i: F_i (before it, fwd[i]) x w_ij x B_i (after it, bwd).
-            for lane in range(nl):
-                rel = fwd_log[i, lane] + bwd_log[lane] - total[lane]
-                for j in range(k):
-                    bit = 1 << j
-                    acc = 0.0
-                    if not active[i, j]:
-                        p_match[p0 + lane, i, j] = 0.0
-                        p_echo[p0 + lane, i, j] = 0.0
-                        continue
-                    for m in range(n_masks):
-                        if m & bit == 0:
-                            acc += fwd[i, m, lane] * bwd[m | bit, lane]
-                    if acc > 0.0:  # in log space: w and the scales may be far from 1
-                        p_match[p0 + lane, i, j] = math.exp(
-                            math.log(acc) + log_match[p0 + lane, i, j] - log_unheard[p0 + lane, i] + rel
-                        )
-                    else:
-                        p_match[p0 + lane, i, j] = 0.0
+            bwd[m, lane] = 1.0
+    for lane in range(nl):
+        bwd_log[lane] = 0.0
+        bound[lane] = 1.0
+    for i in range(s - 1, -1, -1):
+        # Marginals of beacon i: F_i (before it, fwd[i]) x w_ij x B_i (after it, bwd).
+        for lane in range(nl):
+            rel = fwd_log[i, lane] + bwd_log[lane] - total[lane]
+            for j in range(k):
+                bit = 1 << j
+                acc = 0.0
+                if not active[i, j]:
+                    p_match[p0 + lane, i, j] = 0.0
                     p_echo[p0 + lane, i, j] = 0.0
-                for q in range(n_pairs):
-                    if not active_pair[i, q]:
-                        continue
-                    both = (1 << pair_j[q]) | (1 << pair_jj[q])
-                    acc = 0.0
-                    for m in range(n_masks):
-                        if m & both == 0:
-                            acc += fwd[i, m, lane] * bwd[m | both, lane]
-                    if acc <= 0.0:
-                        continue
-                    log_wq = log_match[p0 + lane, i, pair_j[q]] - log_unheard[p0 + lane, i]
-                    pair = math.exp(math.log(acc) + log_wq + log_e[0 if shared else p0 + lane, q] + rel)
-                    p_match[p0 + lane, i, pair_j[q]] += pair
-                    p_match[p0 + lane, i, pair_jj[q]] += pair
-                    p_echo[p0 + lane, i, pair_jj[q]] += pair
-            if heard[i]:
-                _backward_stage(w, pw, i, k, pair_j, pair_jj, nl, bwd, active, active_pair)
-                _bound_step(w, pw, i, nl, bwd, bound, bwd_log)
+                    continue
+                for m in range(n_masks):
+                    if m & bit == 0:
+                        acc += fwd[i, m, lane] * bwd[m | bit, lane]
+                if acc > 0.0:  # in log space: w and the scales may be far from 1
+                    p_match[p0 + lane, i, j] = math.exp(
+                        math.log(acc) + log_match[p0 + lane, i, j] - log_unheard[p0 + lane, i] + rel
+                    )
+                else:
+                    p_match[p0 + lane, i, j] = 0.0
+                p_echo[p0 + lane, i, j] = 0.0
+            for q in range(n_pairs):
+                if not active_pair[i, q]:
+                    continue
+                both = (1 << pair_j[q]) | (1 << pair_jj[q])
+                acc = 0.0
+                for m in range(n_masks):
+                    if m & both == 0:
+                        acc += fwd[i, m, lane] * bwd[m | both, lane]
+                if acc <= 0.0:
+                    continue
+                log_wq = log_match[p0 + lane, i, pair_j[q]] - log_unheard[p0 + lane, i]
+                pair = math.exp(math.log(acc) + log_wq + log_e[0 if shared else p0 + lane, q] + rel)
+                p_match[p0 + lane, i, pair_j[q]] += pair
+                p_match[p0 + lane, i, pair_jj[q]] += pair
+                p_echo[p0 + lane, i, pair_jj[q]] += pair
+        if heard[i]:
+            _backward_stage(w, pw, i, k, pair_j, pair_jj, nl, bwd, active, active_pair)
+            _bound_step(w, pw, i, nl, bwd, bound, bwd_log)

@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from ..config import Config
 from ..errors import InputError
-from ._exact_kernel import associate_kernel
+from ..model.parallel import threaded
+from ._exact_kernel import associate_kernel, associate_kernel_threaded
 from .base import Association, Engine
 
 MAX_SIGNALS = 12
@@ -56,7 +57,8 @@ def associate(
     log_z = np.empty(n)
     shape = (n, s, k) if marginals else (0, s, k)
     p_match, p_echo = np.empty(shape), np.empty(shape)
-    associate_kernel(
+    kernel = associate_kernel_threaded if threaded(n) else associate_kernel
+    kernel(
         np.ascontiguousarray(log_match, dtype=np.float64),
         np.ascontiguousarray(log_unheard, dtype=np.float64),
         pair_j,

@@ -11,8 +11,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, vectorize
+from numba import njit, prange, vectorize
 from numpy.typing import ArrayLike, NDArray
+
+from .parallel import threaded
 
 WGS84_A_M = 6378137.0
 WGS84_F = 1.0 / 298.257223563
@@ -107,6 +109,136 @@ def _point_terms(lat_deg: ArrayLike, lon_deg: ArrayLike) -> tuple[tuple[NDArray,
 def _stacked_terms(lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray[np.float64]:
     """`_point_terms` of points (flattened) as one (6, n) array, in `_andoyer_m`'s order."""
     return np.array([t for pair in _point_terms(np.ravel(lat_deg), np.ravel(lon_deg)) for t in pair])
+
+
+# Ranges about a centre (`ranges_about_centre_m`): a pair's error bound, |d|^3 (0.25 / (R0 -
+# |d|)^2 + (1 + tan^2 lat0) / a^2) (|d| the point's distance from the centre, R0 the centre's
+# range, a the Earth's radius: the third directional derivative of a distance is at most
+# 2 / sqrt(3) / r^2, the Taylor remainder 1/6 of it; the second term bounds what the
+# curvature of the (lat, lon) grid adds), held under this; the exact formula elsewhere.
+EXPANSION_TOLERANCE_M = 10.0
+EXPANSION_STEP_KM = 1.0  # the finite differences' step
+MIN_EXPANDED = 64  # fewer points: the exact formula for every pair
+
+
+def ranges_about_centre_m(lat: ArrayLike, lon: ArrayLike, lat_b: ArrayLike, lon_b: ArrayLike) -> NDArray:
+    """Ranges (m) from n points (lat, lon), a cloud, to m far points (lat_b, lon_b), (n, m):
+    `range_matrix_m`'s to within `EXPANSION_TOLERANCE_M`, cheaper. About the cloud's centre
+    (its mean point), each range is a second-order expansion in (lat, lon),
+
+        R(x) = R0 + g . d + d' H d / 2,    d = (lat - lat0, lon - lon0) in degrees,
+
+    its gradient and Hessian from the exact ranges at nine points `EXPANSION_STEP_KM` apart
+    about the centre (`_expansion`); a pair whose error bound (`EXPANSION_TOLERANCE_M`'s
+    comment) exceeds the tolerance (a point far from the centre, or near the far point)
+    gets the exact formula. Fewer than `MIN_EXPANDED` points: `range_matrix_m` itself."""
+    lat, lon = np.ravel(np.asarray(lat, dtype=np.float64)), np.ravel(np.asarray(lon, dtype=np.float64))
+    lat_b, lon_b = np.ravel(np.asarray(lat_b, dtype=np.float64)), np.ravel(np.asarray(lon_b, dtype=np.float64))
+    if len(lat) < MIN_EXPANDED or not np.all(np.isfinite(lat) & np.isfinite(lon)):
+        return range_matrix_m(lat, lon, lat_b, lon_b)
+    centre, coef, far_terms = _expansion(lat, lon, lat_b, lon_b, EXPANSION_STEP_KM)
+    out = np.empty((len(lat), len(lat_b)))
+    kernel = _expanded_ranges_threaded_m if threaded(len(lat)) else _expanded_ranges_m
+    kernel(lat, lon, centre, coef, far_terms, EXPANSION_TOLERANCE_M / 1e3, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _expansion(lat, lon, lat_b, lon_b, step_km):  # pragma: no cover - compiled
+    """The cloud's centre and scales, (lat0, lon0, km per degree of lat and of lon, a^2 /
+    (1 + tan^2 lat0) in km^2), the expansion's coefficients (m, 6): R0, dR/dlat, dR/dlon,
+    d2R/dlat2, d2R/dlat dlon, d2R/dlon2 (m; degrees) by central differences of `step_km`
+    of the exact ranges, and the far points' terms (6, m) for `_andoyer_m`."""
+    n, m = lat.shape[0], lat_b.shape[0]
+    lat0 = 0.0
+    shift = 0.0
+    for p in range(n):
+        lat0 += lat[p]
+        dx = lon[p] - lon[0]
+        shift += dx - 360.0 if dx >= 180.0 else (dx + 360.0 if dx < -180.0 else dx)
+    lat0 /= n
+    lon0 = lon[0] + shift / n
+    lon0 = lon0 - 360.0 if lon0 >= 180.0 else (lon0 + 360.0 if lon0 < -180.0 else lon0)
+    phi = math.radians(lat0)
+    w = math.sqrt(1.0 - WGS84_E2 * math.sin(phi) ** 2)
+    ky = math.radians(1.0) * WGS84_A_M * (1.0 - WGS84_E2) / w**3 / 1e3
+    kx = math.radians(1.0) * WGS84_A_M / w * math.cos(phi) / 1e3
+    centre = np.array([lat0, lon0, ky, kx, (WGS84_A_M / 1e3) ** 2 / (1.0 + math.tan(phi) ** 2)])
+    far = np.empty((6, m))
+    for i in range(m):
+        far[0, i], far[1, i], far[2, i], far[3, i], far[4, i], far[5, i] = _terms(lat_b[i], lon_b[i])
+    hy, hx = step_km / ky, step_km / kx
+    r = np.empty((9, m))
+    for q, (oy, ox) in enumerate(((0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))):
+        sb, cb, shb, chb, shl, chl = _terms(lat0 + oy * hy, lon0 + ox * hx)
+        for i in range(m):
+            r[q, i] = _andoyer_m(sb, cb, shb, chb, shl, chl, far[0, i], far[1, i], far[2, i], far[3, i], far[4, i],
+                                 far[5, i])  # fmt: skip
+    coef = np.empty((m, 6))
+    for i in range(m):
+        c, n_, s_, e, w_, ne, nw, se, sw = r[:, i]
+        coef[i, 0] = c
+        coef[i, 1] = (n_ - s_) / (2 * hy)
+        coef[i, 2] = (e - w_) / (2 * hx)
+        coef[i, 3] = (n_ - 2 * c + s_) / hy**2
+        coef[i, 4] = (ne - nw - se + sw) / (4 * hy * hx)
+        coef[i, 5] = (e - 2 * c + w_) / hx**2
+    return centre, coef, far
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _terms(lat_deg, lon_deg):  # pragma: no cover - compiled
+    """`_point_terms` of one point: (sin b, cos b, sin b/2, cos b/2, sin lambda/2, cos lambda/2)."""
+    b = math.atan((1.0 - WGS84_F) * math.tan(math.radians(lat_deg)))
+    half_lon = math.radians(lon_deg) / 2.0
+    return math.sin(b), math.cos(b), math.sin(b / 2.0), math.cos(b / 2.0), math.sin(half_lon), math.cos(half_lon)
+
+
+@njit(cache=True, nogil=True)
+def _expanded_ranges_m(lat, lon, centre, coef, far_terms, tolerance_km, out):  # pragma: no cover - compiled
+    """`ranges_about_centre_m`'s loop over the points (`_expanded_point`)."""
+    for p in range(lat.shape[0]):
+        _expanded_point(p, lat, lon, centre, coef, far_terms, tolerance_km, out)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _expanded_ranges_threaded_m(lat, lon, centre, coef, far_terms, tolerance_km, out):  # pragma: no cover
+    """`_expanded_ranges_m` on numba's threads (`model.parallel`)."""
+    for q in prange(lat.shape[0]):
+        _expanded_point(np.intp(q), lat, lon, centre, coef, far_terms, tolerance_km, out)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _expanded_point(p, lat, lon, centre, coef, far_terms, tolerance_km, out):  # pragma: no cover - compiled
+    """Point p's ranges: its offset from the centre (`_expansion`'s) and, per far point, the
+    expansion or (beyond its error bound) `_andoyer_m`."""
+    lat0, lon0, ky, kx, grid_km2 = centre[0], centre[1], centre[2], centre[3], centre[4]
+    dy = lat[p] - lat0
+    dx = lon[p] - lon0
+    if dx >= 180.0:
+        dx -= 360.0
+    elif dx < -180.0:
+        dx += 360.0
+    d_km = math.sqrt((dy * ky) ** 2 + (dx * kx) ** 2)
+    cube = d_km * d_km * d_km
+    grid = cube / grid_km2  # the (lat, lon) grid's share of the bound
+    have_terms = False
+    sb = cb = shb = chb = shl = chl = 0.0
+    for i in range(coef.shape[0]):
+        clear_km = coef[i, 0] / 1e3 - d_km
+        if clear_km > 0.0 and 0.25 * cube + (grid - tolerance_km) * clear_km * clear_km <= 0.0:
+            out[p, i] = (
+                coef[i, 0] + coef[i, 1] * dy + coef[i, 2] * dx
+                + 0.5 * coef[i, 3] * dy * dy + coef[i, 4] * dy * dx + 0.5 * coef[i, 5] * dx * dx
+            )  # fmt: skip
+            continue
+        if not have_terms:
+            sb, cb, shb, chb, shl, chl = _terms(lat[p], lon[p])
+            have_terms = True
+        out[p, i] = _andoyer_m(
+            sb, cb, shb, chb, shl, chl,
+            far_terms[0, i], far_terms[1, i], far_terms[2, i], far_terms[3, i], far_terms[4, i], far_terms[5, i],
+        )  # fmt: skip
 
 
 def radii_of_curvature_m(lat_deg: ArrayLike) -> tuple[NDArray, NDArray]:

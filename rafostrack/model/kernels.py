@@ -46,7 +46,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, vectorize
+from numba import njit, prange, vectorize
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 FAR_EARLY = 9.0  # sds before the prediction: Gaussian e^-40, the delayed copy less
@@ -176,28 +176,47 @@ def factors_kernel(  # pragma: no cover - compiled
     """log w_ij (P, s, K) and log u_i (P, s) of one window (module docstring): `toa`
     (1 or P, K) and the horizon `h` (1 or P,), one row shared by all particles, or one per
     particle (a batch of windows); `signal_term` (rows of `toa`, K), added to every
-    log w_ij of signal j (e.g. the echo model's), or (0, K): none."""
-    n, s = mu.shape
-    k = toa.shape[1]
-    shared = toa.shape[0] == 1
-    added = signal_term.shape[0] > 0
+    log w_ij of signal j (e.g. the echo model's), or (0, K): none. Particle by particle
+    (`_factors_row`)."""
     c = constants(sigma, eps, tau, shape)
+    for p in range(mu.shape[0]):
+        _factors_row(p, mu, p_detect, toa, sigma, eps, tau, log_lam, h, ranked, signal_term, c, log_match, log_unheard)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def factors_kernel_threaded(  # pragma: no cover - compiled
+    mu, p_detect, toa, sigma, eps, tau, shape, log_lam, h, ranked, signal_term, log_match, log_unheard
+):
+    """`factors_kernel` on numba's threads (`model.parallel`)."""
+    c = constants(sigma, eps, tau, shape)
+    for q in prange(mu.shape[0]):
+        p = np.intp(q)  # (one integer type: a prange index is unsigned)
+        _factors_row(p, mu, p_detect, toa, sigma, eps, tau, log_lam, h, ranked, signal_term, c, log_match, log_unheard)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _factors_row(  # pragma: no cover - compiled
+    p, mu, p_detect, toa, sigma, eps, tau, log_lam, h, ranked, signal_term, c, log_match, log_unheard
+):
+    """Particle p's log w_ij and log u_i (`factors_kernel`)."""
+    s = mu.shape[1]
+    k = toa.shape[1]
+    row = 0 if toa.shape[0] == 1 else p
+    added = signal_term.shape[0] > 0
     early = -FAR_EARLY * sigma
     late = FAR_LATE * tau if eps > 0.0 else FAR_LATE_DIRECT * sigma
-    for p in range(n):
-        row = 0 if shared else p
-        for i in range(s):
-            log_pd = math.log(p_detect[p, i])
-            for j in range(k):
-                r = toa[row, j] - mu[p, i]
-                if r < early or r > late:
-                    log_match[p, i, j] = -np.inf
-                elif added:
-                    log_match[p, i, j] = (log_pd + logpdf_c(r, c) - log_lam) + signal_term[row, j]
-                else:
-                    log_match[p, i, j] = log_pd + logpdf_c(r, c) - log_lam
-            if ranked:
-                p_in = cdf_c(h[row] - mu[p, i], c) - cdf_c(-mu[p, i], c)
-                log_unheard[p, i] = math.log1p(-p_detect[p, i] * min(max(p_in, 0.0), 1.0))
+    for i in range(s):
+        log_pd = math.log(p_detect[p, i])
+        for j in range(k):
+            r = toa[row, j] - mu[p, i]
+            if r < early or r > late:
+                log_match[p, i, j] = -np.inf
+            elif added:
+                log_match[p, i, j] = (log_pd + logpdf_c(r, c) - log_lam) + signal_term[row, j]
             else:
-                log_unheard[p, i] = math.log1p(-p_detect[p, i])
+                log_match[p, i, j] = log_pd + logpdf_c(r, c) - log_lam
+        if ranked:
+            p_in = cdf_c(h[row] - mu[p, i], c) - cdf_c(-mu[p, i], c)
+            log_unheard[p, i] = math.log1p(-p_detect[p, i] * min(max(p_in, 0.0), 1.0))
+        else:
+            log_unheard[p, i] = math.log1p(-p_detect[p, i])

@@ -39,8 +39,9 @@ from numpy.typing import NDArray
 
 from ..config import ModelConfig
 from ..domain import BeaconTable, FloatInfo, elapsed_days
-from .geodesy import range_matrix_m
-from .kernels import factors_kernel, toa_cdf_ufunc, toa_logpdf_ufunc
+from .geodesy import ranges_about_centre_m
+from .kernels import factors_kernel, factors_kernel_threaded, toa_cdf_ufunc, toa_logpdf_ufunc
+from .parallel import threaded
 
 
 @dataclass(frozen=True)
@@ -93,8 +94,9 @@ def _per_beacon(values: NDArray | None, default: float) -> NDArray | float:
 
 
 def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np.float64]:
-    """Ranges (P, s) from particle positions (P,) to the window's beacons."""
-    return range_matrix_m(lat, lon, wb.lat, wb.lon)
+    """Ranges (P, s) from particle positions (P,) to the window's beacons (about the cloud's
+    centre, within `geodesy.EXPANSION_TOLERANCE_M` of the exact formula)."""
+    return ranges_about_centre_m(lat, lon, wb.lat, wb.lon)
 
 
 def predicted_toa_s(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
@@ -214,7 +216,8 @@ def association_factors(
     if model.echo_fraction > 0 and k:  # the echo terms' per-signal part joins log w_ij in the kernel
         no_echo, log_echo = echo_factors(toa_s, h, lam, model)
         signal_term = np.atleast_2d(no_echo)
-    factors_kernel(
+    kernel = factors_kernel_threaded if threaded(n) else factors_kernel
+    kernel(
         mu,
         np.ascontiguousarray(np.broadcast_to(p_detect, mu.shape), dtype=np.float64),
         np.ascontiguousarray(np.atleast_2d(toa_s), dtype=np.float64),

@@ -27,10 +27,11 @@ import math
 from collections.abc import Iterator
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numpy.typing import NDArray
 
 from ..filtering.resampling import log_sum_exp
+from ..model.parallel import threaded
 
 MIXTURE_TOL = 1e-4
 
@@ -39,40 +40,53 @@ MIXTURE_TOL = 1e-4
 def pair_terms(za_t, zb, log_norm, log_w, c, rows, terms, top):  # pragma: no cover - compiled
     """top[r] = max_i t_ri and terms[r, i] = t_ri - top[r] (t_ri where top[r] = -inf), with
     t_ri = log W_i + n_c - |zb_c,rows[r] - za_ci|^2 / 2 (za_t (C, d, I): the origins'
-    whitened states, dimension-major; zb (C, J, d)). Loops that the compiler vectorises:
-    the squared distance one dimension at a time, the maximum over eight lanes."""
-    d, n_i = za_t.shape[1], za_t.shape[2]
-    lanes = np.empty(8)
-    whole = n_i - n_i % 8
+    whitened states, dimension-major; zb (C, J, d)), row by row (`_pair_row`)."""
     for r in range(rows.shape[0]):
-        j = rows[r]
-        row = terms[r]
+        _pair_row(r, za_t, zb, log_norm, log_w, c, rows, terms, top)
+
+
+@njit(cache=True, nogil=True, boundscheck=False, parallel=True)
+def pair_terms_threaded(za_t, zb, log_norm, log_w, c, rows, terms, top):  # pragma: no cover - compiled
+    """`pair_terms` on numba's threads (`model.parallel`)."""
+    for r in prange(rows.shape[0]):
+        _pair_row(np.intp(r), za_t, zb, log_norm, log_w, c, rows, terms, top)
+
+
+@njit(cache=True, nogil=True, boundscheck=False, inline="always")
+def _pair_row(r, za_t, zb, log_norm, log_w, c, rows, terms, top):  # pragma: no cover - compiled
+    """Row r of `pair_terms`. Loops that the compiler vectorises: the squared distance one
+    dimension at a time, the maximum over eight lanes."""
+    d, n_i = za_t.shape[1], za_t.shape[2]
+    whole = n_i - n_i % 8
+    lanes = np.empty(8)
+    j = rows[r]
+    row = terms[r]
+    for i in range(n_i):
+        row[i] = 0.0
+    for e in range(d):
+        target = zb[c, j, e]
+        origin = za_t[c, e]
         for i in range(n_i):
-            row[i] = 0.0
-        for e in range(d):
-            target = zb[c, j, e]
-            origin = za_t[c, e]
-            for i in range(n_i):
-                diff = target - origin[i]
-                row[i] += diff * diff
-        base = log_norm[c]
+            diff = target - origin[i]
+            row[i] += diff * diff
+    base = log_norm[c]
+    for i in range(n_i):
+        row[i] = log_w[i] + base - 0.5 * row[i]
+    for k in range(8):
+        lanes[k] = -np.inf
+    for i in range(0, whole, 8):
+        for k in range(8):
+            if row[i + k] > lanes[k]:
+                lanes[k] = row[i + k]
+    best = -np.inf
+    for k in range(8):
+        best = max(best, lanes[k])
+    for i in range(whole, n_i):
+        best = max(best, row[i])
+    top[r] = best
+    if best > -np.inf:
         for i in range(n_i):
-            row[i] = log_w[i] + base - 0.5 * row[i]
-        for k in range(8):
-            lanes[k] = -np.inf
-        for i in range(0, whole, 8):
-            for k in range(8):
-                if row[i + k] > lanes[k]:
-                    lanes[k] = row[i + k]
-        best = -np.inf
-        for k in range(8):
-            best = max(best, lanes[k])
-        for i in range(whole, n_i):
-            best = max(best, row[i])
-        top[r] = best
-        if best > -np.inf:
-            for i in range(n_i):
-                row[i] -= best
+            row[i] -= best
 
 
 # Rows per block: a block of terms (BLOCK x 512 doubles, 0.5 MB) stays in the cache between
@@ -92,7 +106,8 @@ def _shifted_exp(
 ) -> NDArray[np.float64]:
     """terms <- exp(t_ri - top_r) of kernel c over `rows`, top <- top_r (`pair_terms`);
     returns the row sums."""
-    pair_terms(za_t, zb, log_norm, log_w, c, rows, terms, top)
+    kernel = pair_terms_threaded if threaded(len(rows) * za_t.shape[2] // 256) else pair_terms
+    kernel(za_t, zb, log_norm, log_w, c, rows, terms, top)
     np.exp(terms, out=terms)
     return terms.sum(axis=1)
 

@@ -1,0 +1,19 @@
+"""When the compiled kernels run their particles on several threads.
+
+Each kernel that loops over independent particles (or a smoother's rows) is compiled twice
+from one body: a serial loop and a `prange` loop over the same per-item function, so an item's
+arithmetic is the same bits either way and whatever the thread count. The threaded one is
+used where it pays: numba has more than one thread (`rafostrack track` on a multi-core
+machine; a batch worker has one, `batch.workers`) and there are enough items to share.
+"""
+
+from __future__ import annotations
+
+import numba
+
+PARALLEL_MIN_ITEMS = 1024  # fewer: starting the threads costs more than they save
+
+
+def threaded(items: int) -> bool:
+    """Whether a kernel over `items` independent items runs on numba's threads."""
+    return items >= PARALLEL_MIN_ITEMS and numba.get_num_threads() > 1
