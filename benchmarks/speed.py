@@ -12,8 +12,9 @@ that do not depend on what else runs.
     python benchmarks/speed.py [--methods exact bp] [--particles 1000 10000] [--config FILE] [--profile]
                                [--report docs/validation.md]
 
-`--report FILE` also writes the table into the `speed` section of that Markdown file
-(`benchmarks/report.py`).
+`--report FILE` also writes the table (and the stage tables, with `--profile`) into the
+`speed` section of that Markdown file (`benchmarks/report.py`). The compiled kernels use
+numba's threads (`NUMBA_NUM_THREADS`; the header says how many).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import argparse
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 import pandas as pd
 from report import machine, markdown_table, write_section
@@ -48,7 +50,10 @@ def main() -> None:
     loaded = load_float(TrackInputs(args.float_file, config_files=tuple(args.config)))
     n_windows = len(loaded.record.windows)
     n_toas = sum(w.n_signals for w in loaded.record.windows)
-    header = f"{args.float_file.name}: {n_windows} windows, {n_toas} TOAs, {len(loaded.problem.beacons)} beacons"
+    header = (
+        f"{args.float_file.name}: {n_windows} windows, {n_toas} TOAs, {len(loaded.problem.beacons)} beacons; "
+        f"{numba.get_num_threads()} kernel thread(s)"
+    )
     print(header)
     truth = pd.read_csv(args.float_file.parent / "truth" / args.float_file.name, parse_dates=["time"])
     truth["time"] = truth["time"].dt.tz_localize(None)
@@ -56,7 +61,7 @@ def main() -> None:
         f"{'method':>9} {'particles':>9} {'total_s':>8} {'filter_s':>9} {'smoother_s':>10} {'calib_s':>8} "
         f"{'rmse_km':>8} {'labels':>7} {'ess/N':>6}"
     )
-    rows = []
+    rows, stages = [], []
     for method in args.methods:
         for particles in args.particles:
             config = with_overrides(loaded.problem.config, filter={**method_overrides(method), "particles": particles})
@@ -74,10 +79,12 @@ def main() -> None:
             if args.profile:
                 problem = loaded.problem.with_config(config)
                 table = stage_table(lambda: track_record(problem, loaded.record))  # noqa: B023
-                print(f"\nseconds per call and stage ({method}, {particles} particles; stages.py):")
+                title = f"Seconds per call and stage ({method}, {particles} particles; stages.py):"
+                print(f"\n{title}")
                 print(table.to_string(index=False, float_format=lambda x: f"{x:.2f}"), "\n", flush=True)
+                stages.append((title, table))
     if args.report:
-        write_section(args.report, "speed", _report(header, pd.DataFrame(rows)))
+        write_section(args.report, "speed", _report(header, pd.DataFrame(rows), stages))
 
 
 def _row(method: str, particles: int, elapsed_s: float, out, truth: pd.DataFrame, loaded) -> dict:
@@ -95,14 +102,19 @@ def _row(method: str, particles: int, elapsed_s: float, out, truth: pd.DataFrame
     }
 
 
-def _report(header: str, table: pd.DataFrame) -> str:
-    """The speed section: what was tracked, on which machine, and the table."""
+def _report(header: str, table: pd.DataFrame, stages: list[tuple[str, pd.DataFrame]]) -> str:
+    """The speed section: what was tracked, on which machine, the table and the stage tables."""
     seconds = {c: (lambda x: f"{x:.2f}") for c in ("total_s", "filter_s", "smoother_s", "calib_s", "rmse_km", "ess/N")}
     return (
         "Wall time of the whole method (every pass) on the 2-year sample float, split into filter, smoother "
         "and calibration; RMSE against the sample's truth, labels right, median ESS of the last pass over N.\n\n"
         f"{header}; {machine()}.\n\n" + markdown_table(table, {**seconds, "labels": lambda x: f"{x:.2%}"})
-    )
+    ) + "".join(f"\n\n{title}\n\n" + markdown_table(stage, _two_decimals(stage)) for title, stage in stages)
+
+
+def _two_decimals(table: pd.DataFrame) -> dict:
+    """Every numeric column of `table` printed with two decimals."""
+    return {c: (lambda x: f"{x:.2f}") for c in table.columns if pd.api.types.is_numeric_dtype(table[c])}
 
 
 if __name__ == "__main__":
