@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numba
 
-PARALLEL_MIN_ITEMS = 1024  # fewer: starting the threads costs more than they save
+PARALLEL_MIN_ITEMS = 256  # fewer: starting the threads costs more than they save
 
 
 def threaded(items: int) -> bool:
