@@ -136,6 +136,7 @@ class ChecksConfig:
     enabled: bool = setting()
     source_scan: bool = setting()
     z_score: float = setting("> 0", _positive)
+    launch_z_score: float = setting("> 0", _positive)
     fix_tolerance_km: float = setting("> 0", _positive)
     position_tolerance_km: float = setting("> 0", _positive)
     clock_tolerance_s: float = setting("> 0", _positive)

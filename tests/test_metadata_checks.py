@@ -187,6 +187,17 @@ def test_a_wrong_launch_fix_is_named_and_replaced(simulated):
     assert np.hypot(*(np.subtract(moved, (info.launch_lat, info.launch_lon)) * [111, 60])) < 8
 
 
+def test_the_launch_fix_is_judged_by_its_own_z_score(simulated):
+    """The launch fix 39 km off: contradicted whatever `z_score` says of the other values,
+    and not at a `launch_z_score` its arrivals cannot reach."""
+    info = simulated[3]
+    lat, lon = displace(np.array(info.launch_lat), np.array(info.launch_lon), 30.0, -25.0)
+    moved = {"launch_lat": float(lat), "launch_lon": float(lon)}
+    for checks, outcome in (({"z_score": 1e3}, CONTRADICTED), ({"launch_z_score": 1e3}, UNDETERMINED)):
+        _, found = _checked(simulated, moved, config=with_overrides(CONFIG, checks=checks))
+        assert found[(info.float_id, "launch_fix")].outcome == outcome
+
+
 def test_a_wrong_end_fix_is_named_and_not_used(simulated):
     """An end fix 20 km off: named with the distance the arrivals support, and the next
     pass tracks without it (`release.with_supported_fixes`). (30 km off, at a window's time

@@ -13,7 +13,8 @@ x's marginal information too):
     C_d^-1 = C^-1 - P^-1,    m_d = C_d C^-1 m.
 
 A value is *contradicted* when the arrivals' correction lies farther from zero than
-`[checks] z_score` of its standard deviations, z sqrt(C_d) (the arrivals are sure the value
+`[checks] z_score` (the launch fix: `launch_z_score`) of its standard deviations, z sqrt(C_d)
+(the arrivals are sure the value
 is not the table's), and than the value's tolerance (the difference matters; the prior's own
 width, which lets calibration refine a value, is not an error); *consistent* when the arrivals
 place it within the tolerance, |correction| <= tolerance + 2 sd with sd <= tolerance (their
@@ -259,7 +260,8 @@ def _fix_checks(
     for name, node, index, prior_sd in fixes:
         arrivals = data_only(*post.block(index), np.array(prior_sd))
         given = (float(problem.lat[node]), float(problem.lon[node]))
-        found.append(_shift_check(file, line, info.float_id, name, given, arrivals, checks.fix_tolerance_km, checks))
+        z_score = checks.launch_z_score if name == "launch_fix" else checks.z_score
+        found.append(_shift_check(file, line, info.float_id, name, given, arrivals, checks.fix_tolerance_km, z_score))
     return found
 
 
@@ -271,7 +273,7 @@ def _shift_check(
     given: tuple[float, float],
     arrivals: tuple[NDArray, NDArray] | None,
     tolerance_km: float,
-    checks: ChecksConfig,
+    z_score: float,
 ) -> MetadataCheck:
     """A position (a fix, a source) against the arrivals' estimate of its displacement (east,
     north km: the first two of `arrivals`' mean and covariance), judged along its direction."""
@@ -281,7 +283,7 @@ def _shift_check(
     distance = float(np.hypot(*shift))
     direction = shift / distance if distance > 0 else np.array([1.0, 0.0])
     sd = float(np.sqrt(direction @ cov @ direction))
-    outcome = outcome_of(distance, sd, tolerance_km, checks.z_score)
+    outcome = outcome_of(distance, sd, tolerance_km, z_score)
     lat, lon = displace(np.array(given[0]), np.array(given[1]), shift[0], shift[1])
     supported = (round(float(lat), 4), round(float(lon), 4))
     return MetadataCheck(file, line, id_, field, 0.0, round(distance, 2), round(sd, 2), "km", outcome,
@@ -411,5 +413,7 @@ def position_checks(
         arrivals = data_only(*post.block(index), prior_sd)
         file, line, name = beacon_source(beacons, int(row))
         given = (float(beacons.lat[row]), float(beacons.lon[row]))
-        found.append(_shift_check(file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks))
+        found.append(
+            _shift_check(file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks.z_score)
+        )
     return found
