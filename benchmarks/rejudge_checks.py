@@ -10,6 +10,8 @@ track, which this does not show.
 
     python benchmarks/rejudge_checks.py DIR [--z 5 4 3.5 3]
 
+Each z-score judges every field, the launch fix too (whose run used `launch_z_score`).
+
 Prints, per field, the injected faults (those the float's arrivals show) named and the
 floats with a false alarm (a contradicted value that is no injected fault), on the
 faulted runs and on the correct tables' runs, at each z-score.
@@ -26,27 +28,15 @@ from typing import Any
 import pandas as pd
 from robustness import float_faults, observable_faults
 
-from rafostrack.calibrate.metadata_checks import CONTRADICTED, outcome_of
+from rafostrack.calibrate.metadata_checks import CONTRADICTED, TOLERANCE_SETTING, outcome_of
 from rafostrack.sim.faults import false_alarms, names
-
-# A field's tolerance in run.json's [checks]; a shift (a fix, a source position) has given 0
-# and the distance as supported.
-TOLERANCE = {
-    "launch_fix": "fix_tolerance_km",
-    "end_fix": "fix_tolerance_km",
-    "position": "position_tolerance_km",
-    "clock_offset_start_s": "clock_tolerance_s",
-    "clock_offset_end_s": "clock_tolerance_s",
-    "offset_s": "offset_tolerance_s",
-    "drift_s_per_day": "drift_tolerance_s_per_day",
-}
 
 
 def rejudged(check: dict[str, Any], settings: dict[str, Any], z: float) -> dict[str, Any]:
     """`check` with its outcome judged at `z` (unchanged where it has no numeric given,
     supported value and sd, or its field no tolerance)."""
     given, supported, sd = check.get("given"), check.get("supported"), check.get("sd")
-    key = TOLERANCE.get(str(check.get("field")))
+    key = TOLERANCE_SETTING.get(str(check.get("field")))  # a shift (fix, position): given 0, the distance
     numbers = all(isinstance(v, int | float) and not isinstance(v, bool) for v in (given, supported, sd))
     if key is None or not numbers or not sd or check.get("outcome") not in (CONTRADICTED, "consistent", "undetermined"):
         return check

@@ -39,7 +39,7 @@ from datetime import UTC, datetime
 from pathlib import Path, PurePath
 from typing import Any
 
-from ..calibrate.metadata_checks import CONTRADICTED, outcome_of, undecided_note
+from ..calibrate.metadata_checks import CONTRADICTED, TOLERANCE_SETTING, outcome_of, undecided_note
 from ..io.writers import csv_text
 from .plan import FAILED, SKIPPED, FloatOutcome
 
@@ -68,7 +68,7 @@ FINDINGS_COLUMNS = (
     "other_sources",
 )
 # The pooled fields and the [checks] tolerance that judges each.
-POOLED_TOLERANCE = {"offset_s": "offset_tolerance_s", "drift_s_per_day": "drift_tolerance_s_per_day"}
+POOLED_TOLERANCE = {field: TOLERANCE_SETTING[field] for field in ("offset_s", "drift_s_per_day")}
 _SHOWN_FLOATS = 5  # float ids printed per finding (all of them are in the CSV)
 _DIGITS = {"s": 1, "km": 1, "s/day": 4, "deg": 4}
 

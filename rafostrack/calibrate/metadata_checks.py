@@ -13,12 +13,12 @@ x's marginal information too):
     C_d^-1 = C^-1 - P^-1,    m_d = C_d C^-1 m.
 
 A value is *contradicted* when the arrivals' correction lies farther from zero than
-`[checks] z_score` (the launch fix: `launch_z_score`) of its standard deviations, z sqrt(C_d)
-(the arrivals are sure the value
-is not the table's), and than the value's tolerance (the difference matters; the prior's own
-width, which lets calibration refine a value, is not an error); *consistent* when the arrivals
-place it within the tolerance, |correction| <= tolerance + 2 sd with sd <= tolerance (their
-95% interval reaches the tolerance band); *undetermined* otherwise: the arrivals' sd exceeds
+`[checks] z_score` (the launch fix: `launch_z_score`) of its standard deviations,
+z sqrt(C_d) (the arrivals are sure the value is not the table's), and than the value's
+tolerance (the difference matters; the prior's own width, which lets calibration refine a
+value, is not an error); *consistent* when the arrivals place it within the tolerance,
+|correction| <= tolerance + 2 sd with sd <= tolerance (their 95% interval reaches the
+tolerance band); *undetermined* otherwise: the arrivals' sd exceeds
 the tolerance (or C_d^-1 is not positive: the arrivals alone do not fix it), or they lean
 away from the value without being sure of it. A value the table does not give (an empty clock_offset_end_s)
 is *estimated*, or undetermined when its sd exceeds the tolerance (then with a warning: the
@@ -44,6 +44,17 @@ from .kalman_evidence import solved
 from .kalman_problem import CLOCK, NODE, position_prior_sd, timing_prior_sd
 
 CONSISTENT, CONTRADICTED, UNDETERMINED, ESTIMATED = "consistent", "contradicted", "undetermined", "estimated"
+# Each checked field's tolerance: its `[checks]` setting (a fix or a position is a distance
+# from the table's, in km).
+TOLERANCE_SETTING = {
+    "launch_fix": "fix_tolerance_km",
+    "end_fix": "fix_tolerance_km",
+    "position": "position_tolerance_km",
+    "clock_offset_start_s": "clock_tolerance_s",
+    "clock_offset_end_s": "clock_tolerance_s",
+    "offset_s": "offset_tolerance_s",
+    "drift_s_per_day": "drift_tolerance_s_per_day",
+}
 
 
 @dataclass(frozen=True)
@@ -253,14 +264,13 @@ def _fix_checks(
     """The launch fix (first node) and, when used, the end fix (last node)."""
     file, line = float_source(info)
     launch, end = [0, 1], [NODE * (problem.n_nodes - 1), NODE * (problem.n_nodes - 1) + 1]
-    fixes = [("launch_fix", 0, launch, [problem.launch_sd_km] * 2)]
+    fixes = [("launch_fix", 0, launch, [problem.launch_sd_km] * 2, checks.launch_z_score)]
     if problem.end_sd_km is not None:
-        fixes.append(("end_fix", problem.n_nodes - 1, end, [problem.end_sd_km] * 2))
+        fixes.append(("end_fix", problem.n_nodes - 1, end, [problem.end_sd_km] * 2, checks.z_score))
     found = []
-    for name, node, index, prior_sd in fixes:
+    for name, node, index, prior_sd, z_score in fixes:
         arrivals = data_only(*post.block(index), np.array(prior_sd))
         given = (float(problem.lat[node]), float(problem.lon[node]))
-        z_score = checks.launch_z_score if name == "launch_fix" else checks.z_score
         found.append(_shift_check(file, line, info.float_id, name, given, arrivals, checks.fix_tolerance_km, z_score))
     return found
 

@@ -92,6 +92,9 @@ def _pair_row(r, za_t, zb, log_norm, log_w, c, rows, terms, top):  # pragma: no 
 # Rows per block: a block of terms (BLOCK x 512 doubles, 0.5 MB) stays in the cache between
 # the compiled loop that fills it and numpy's exponential and sum.
 BLOCK = 128
+# Pair terms that count as one of `model.parallel.threaded`'s items (a block of BLOCK rows
+# of 512 columns: 256 items).
+PAIRS_PER_ITEM = 256
 
 
 def _shifted_exp(
@@ -106,7 +109,7 @@ def _shifted_exp(
 ) -> NDArray[np.float64]:
     """terms <- exp(t_ri - top_r) of kernel c over `rows`, top <- top_r (`pair_terms`);
     returns the row sums."""
-    kernel = pair_terms_threaded if threaded(len(rows) * za_t.shape[2] // 256) else pair_terms
+    kernel = pair_terms_threaded if threaded(len(rows) * za_t.shape[2] // PAIRS_PER_ITEM) else pair_terms
     kernel(za_t, zb, log_norm, log_w, c, rows, terms, top)
     np.exp(terms, out=terms)
     return terms.sum(axis=1)
