@@ -657,44 +657,60 @@ def reference_rows(rows: list[dict[str, Any]], out_root: Path, files: list[Path]
     """The correct tables' runs (`score` rows) by float, with their false alarms (every
     contradicted value: the tables were right), and with the mission's pooled ones."""
     table = pd.DataFrame(rows).set_index("float")
-    alarms = {name: false_alarms([], metadata_checks(out_root / "default" / name / "run.json")) for name in table.index}
-    pooled = pooled_alarms(out_root / "default", files)
+    checks = {name: metadata_checks(out_root / "default" / name / "run.json") for name in table.index}
+    alarms = {name: false_alarms([], checks[name]) for name in table.index}
+    found = mission_alarms(out_root / "default", files)
     table["false_alarms"] = [len(alarms[name]) for name in table.index]
     mission_of = {f.stem: f.parent.name for f in files}
-    table["false_alarms_mission"] = [len(alarms[name]) + len(pooled[mission_of[name]]) for name in table.index]
+    table["false_alarms_mission"] = [
+        len(distinct(false_alarms([], checks[name] + found[mission_of[name]]))) for name in table.index
+    ]
     table["false_alarm_list"] = [_alarm_text(alarms[name]) for name in table.index]
     return table
 
 
-def pooled_alarms(out_root: Path, files: list[Path]) -> dict[str, list[dict[str, Any]]]:
-    """Per mission, what a batch finds on its floats' arrivals together and no float alone
-    (`batch.findings`: a source's offset or drift pooled over the floats that hear it), as
-    contradicted metadata_checks entries."""
+def mission_alarms(out_root: Path, files: list[Path]) -> dict[str, list[dict[str, Any]]]:
+    """Per mission, the values a batch finds contradicted (`batch.findings`: on one float or
+    more, or on their arrivals together: a source's offset, drift or position pooled over
+    the floats that hear it), as contradicted metadata_checks entries."""
     checks: dict[str, list] = {}
     for f in files:
         run = json.loads((out_root / f.stem / "run.json").read_text())
         checks.setdefault(f.parent.name, []).extend(parse_checks(run, f.stem))
     return {
         mission: [
-            {"file": x.file, "id": x.id, "field": x.field, "outcome": "contradicted"}
+            {
+                "file": x.file,
+                "id": x.id,
+                "field": x.field,
+                "outcome": "contradicted",
+                "alternatives": x.alternatives,
+                "other_sources": x.other_sources,
+            }
             for x in mission_findings(mission, found)
-            if not x.contradicting
         ]
         for mission, found in checks.items()
     }
 
 
+def distinct(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """`entries` once per table value (file name, id, field)."""
+    seen = {(Path(e["file"]).name, e["id"], e["field"]): e for e in entries}
+    return list(seen.values())
+
+
 def with_mission_findings(rows: list[dict[str, Any]], out_root: Path, files: list[Path]) -> list[dict[str, Any]]:
-    """`rows` with the faults named and the false alarms counting the mission's pooled
-    findings too (`pooled_alarms`): `named_mission`, `false_alarms_mission`."""
-    pooled, by_stem = pooled_alarms(out_root, files), {f.stem: f for f in files}
+    """`rows` with the faults named and the false alarms counting the mission's findings
+    too (`mission_alarms`: a finding names the value for every float of the mission):
+    `named_mission`, `false_alarms_mission`."""
+    found, by_stem = mission_alarms(out_root, files), {f.stem: f for f in files}
     for row in rows:
         float_file = by_stem[row["float"]]
         mine = float_faults(float_file)
         shown = observable_faults(float_file, mine)
-        own = metadata_checks(out_root / float_file.stem / "run.json")
-        row["named_mission"] = len(shown) - len(unnamed_faults(shown, own + pooled[row["mission"]]))
-        row["false_alarms_mission"] = row["false_alarms"] + len(false_alarms(mine, pooled[row["mission"]]))
+        own = metadata_checks(out_root / float_file.stem / "run.json") + found[row["mission"]]
+        row["named_mission"] = len(shown) - len(unnamed_faults(shown, own))
+        row["false_alarms_mission"] = len(distinct(false_alarms(mine, own)))
     return rows
 
 

@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from support import simulated_mission_dir
@@ -22,6 +23,7 @@ from rafostrack import batch as b
 from rafostrack.batch.findings import (
     FINDINGS_COLUMNS,
     FINDINGS_NAME,
+    LINEAR_LIMIT_KM,
     batch_findings,
     findings_csv,
     median_value,
@@ -30,7 +32,9 @@ from rafostrack.batch.findings import (
     pooled_check,
 )
 from rafostrack.batch.report import report_findings
+from rafostrack.calibrate.metadata_checks import MetadataCheck, SourceInformation
 from rafostrack.cli import main
+from rafostrack.model.geodesy import displace
 
 BEACONS = "/data/dimes/beacons.csv"
 FLOATS = "/data/dimes/floats.csv"
@@ -247,7 +251,7 @@ def test_batch_findings_read_current_outputs_per_mission(tmp_path):
     assert len(unreadable) == 1 and "other/f9/run.json: cannot be read" in unreadable[0]
 
 
-CHECKS = {"z_score": 5.0, "offset_tolerance_s": 5.0, "drift_tolerance_s_per_day": 0.015}
+CHECKS = {"z_score": 5.0, "offset_tolerance_s": 5.0, "drift_tolerance_s_per_day": 0.015, "position_tolerance_km": 10.0}
 
 
 def _configured(float_id: str, *entries: dict[str, Any]) -> list:
@@ -293,11 +297,96 @@ def test_the_pool_weighs_each_float_by_its_precision_and_stays_quiet_within_the_
     assert mission_findings("dimes", two) == [] and mission_findings("dimes", leaning) == []
 
 
-def test_a_float_own_value_and_a_source_position_are_never_pooled():
+def test_a_float_own_value_and_a_source_position_without_information_are_never_pooled():
     clock = _entry(FLOATS, 4, "f0", "clock_offset_end_s", 0.0, 30.0, "undetermined")
     position = {**_entry(BEACONS, 5, "B3", "position", 0.0, 40.0, "undetermined", unit="km"), "sd": 1.0}
     checks = [*_configured("f0", clock, position), *_configured("f1", position)]
     assert mission_findings("dimes", checks) == []
+
+
+SOURCE_AT = (-64.0, -60.0)  # B3's table position
+SOUND_KM_S = 1.5
+
+
+def _heard_from(
+    bearing_deg: float, shift: np.ndarray, rng: np.random.Generator, at: tuple[float, float] = (120.0, 0.0)
+):
+    """A float hearing B3 from one bearing for 200 days: each arrival moves by -u.(east,
+    north) / c + o + d t (t days from the epoch) plus 1 s noise, u the unit vector from the
+    source towards the float; its position check as run.json holds it, with the arrivals'
+    information (J, h) on the corrections from `at` (one bearing: J of rank 2, a constant and
+    a trend)."""
+    u = np.array([np.sin(np.radians(bearing_deg)), np.cos(np.radians(bearing_deg))])
+    days = np.linspace(0.0, 200.0, 150)
+    design = np.column_stack([np.tile(-u / SOUND_KM_S, (len(days), 1)), np.ones_like(days), days])
+    toa_shift = design @ shift + rng.normal(0.0, 1.0, len(days))
+    info = SourceInformation(tuple(map(tuple, design.T @ design)), tuple(design.T @ toa_shift), at)
+    check = MetadataCheck(BEACONS, 5, "B3", "position", 0.0, None, None, "km", "undetermined",
+                          given_lat_lon=SOURCE_AT, information=info)  # fmt: skip
+    return check.as_json(), design, toa_shift
+
+
+def test_a_source_position_no_float_can_check_is_found_by_floats_at_other_bearings():
+    """B3 sits 25 km from its table position (15 km east, 20 km south). Three floats hear it
+    from bearings 30, 150 and 270 degrees; each alone cannot tell a displacement across its
+    bearing, or along it from an offset. Their information pooled equals the least-squares
+    fit of all their arrivals together (the oracle, on the stacked design): contradicted,
+    one finding for the source at the position the arrivals support."""
+    rng = np.random.default_rng(5)
+    shift = np.array([15.0, -20.0, 0.0, 0.0])
+    floats = [_heard_from(bearing, shift, rng) for bearing in (30.0, 150.0, 270.0)]
+    assert all(np.linalg.matrix_rank(np.array(e["information"]["matrix"])) == 2 for e, _, _ in floats)
+    checks = [c for k, (entry, _, _) in enumerate(floats) for c in _configured(f"f{k}", entry)]
+
+    design = np.vstack([d for _, d, _ in floats])
+    fitted, *_ = np.linalg.lstsq(design, np.concatenate([t for _, _, t in floats]), rcond=None)
+    cov = np.linalg.inv(design.T @ design)
+    distance = np.hypot(*fitted[:2])
+    direction = fitted[:2] / distance
+    lat, lon = displace(np.array(SOURCE_AT[0]), np.array(SOURCE_AT[1]), *fitted[:2])
+
+    (finding,) = mission_findings("dimes", checks)
+    pooled = finding.pooled
+    assert pooled is not None and pooled.outcome == "contradicted" and finding.contradicting == ()
+    assert pooled.value == round(distance, 2) and abs(distance - 25.0) < 3.0
+    assert pooled.sd == round(float(np.sqrt(direction @ cov[:2, :2] @ direction)), 2)
+    assert pooled.lat_lon == (round(float(lat), 4), round(float(lon), 4)) == finding.supported_lat_lon
+    assert finding.message() == (
+        f"mission dimes: beacons.csv line 5: field 'position' of source B3: given -64.000, -60.000; the arrivals "
+        f"of the 3 floats that hear it support {lat:.3f}, {lon:.3f} ({distance:.1f} km away, sd {pooled.sd:.1f} km) "
+        "together (none alone is sure)"
+    )
+    assert mission_findings("dimes", checks[:1]) == []  # one float's arrivals alone: nothing to pool
+
+
+def test_a_pool_beyond_the_linear_model_is_undetermined():
+    """The same floats with B3 500 km off: the arrivals' information is linear in the
+    displacement only near the table's position, so the pool says nothing (undetermined,
+    no finding) rather than a position it cannot vouch for."""
+    rng = np.random.default_rng(5)
+    shift = np.array([300.0, -400.0, 0.0, 0.0])
+    checks = [
+        c for k, b in enumerate((30.0, 150.0, 270.0)) for c in _configured(f"f{k}", _heard_from(b, shift, rng)[0])
+    ]
+    pooled = pooled_check(checks)
+    assert pooled is not None and pooled.value > LINEAR_LIMIT_KM and pooled.outcome == "undetermined"
+    assert mission_findings("dimes", checks) == []
+
+
+def test_floats_checked_against_another_offset_pool_on_the_same_corrections():
+    """A float whose run used another offset for B3 (a rescheduled source: its corrections
+    run from 150 s, not 120 s) adds the same information, shifted: the pool is unchanged."""
+    shift = np.array([15.0, -20.0, 0.0, 0.0])
+    same = [_heard_from(b, shift, np.random.default_rng(7))[0] for b in (30.0, 150.0, 270.0)]
+    moved_entry, _, _ = _heard_from(270.0, shift - np.array([0.0, 0.0, 30.0, 0.0]), np.random.default_rng(7),
+                                    at=(150.0, 0.0))  # fmt: skip
+    moved = [*same[:2], moved_entry]
+    pools = [
+        pooled_check([c for k, e in enumerate(entries) for c in _configured(f"f{k}", e)]) for entries in (same, moved)
+    ]
+    assert pools[0] is not None and pools[1] is not None
+    assert pools[0].value == pytest.approx(pools[1].value, abs=0.011)
+    assert pools[0].lat_lon == pytest.approx(pools[1].lat_lon, abs=1e-4)
 
 
 def test_the_csv_and_the_printed_lines(tmp_path):

@@ -22,6 +22,7 @@ from rafostrack.calibrate.metadata_checks import (
     MetadataCheck,
     data_only,
     outcome_of,
+    source_information,
     warnings_of,
     with_position_alternative,
 )
@@ -52,6 +53,36 @@ def test_data_only_estimate_equals_the_fit_without_the_prior():
     cov_free = np.linalg.inv((a / 0.3).T @ (a / 0.3))
     np.testing.assert_allclose(estimate, (cov_free @ (a / 0.3).T @ (y / 0.3))[:2], rtol=1e-9)
     np.testing.assert_allclose(cov_d, cov_free[:2, :2], rtol=1e-9)
+
+
+def test_source_information_is_what_the_arrivals_alone_say_of_the_source():
+    """Linear-Gaussian oracle: arrivals y = A z + e over z = (east, north, a, d, clock at
+    launch, clock at the end, two other unknowns with priors kept). From the posterior of
+    the first six under every prior, `source_information` gives the information on (east,
+    north, o = a - d mid, d) that the arrivals and the kept priors alone hold, the clocks
+    marginalised: built here directly from A, never from a posterior."""
+    rng = np.random.default_rng(11)
+    a = rng.normal(size=(60, 8))
+    y = a @ rng.normal(size=8) + rng.normal(0, 0.5, 60)
+    prior_sd = np.array([0.5, 0.5, 3.0, 0.02, 2.0, np.inf])  # no prior on the end clock
+    kept_sd = np.array([1.5, 0.7])
+    whitened = a / 0.5
+    info = whitened.T @ whitened + np.diag(np.concatenate([1.0 / prior_sd**2, 1.0 / kept_sd**2]))
+    cov = np.linalg.inv(info)
+    mean = cov @ whitened.T @ (y / 0.5)
+    matrix, vector = source_information(mean[:6], cov[:6, :6], prior_sd, mid_day=40.0)
+
+    data_info = whitened.T @ whitened + np.diag(np.concatenate([np.zeros(6), 1.0 / kept_sd**2]))
+    data_vector = whitened.T @ (y / 0.5)
+    out = [4, 5, 6, 7]
+    through = data_info[:4, out] @ np.linalg.inv(data_info[np.ix_(out, out)])
+    expected = data_info[:4, :4] - through @ data_info[out, :4]
+    expected_vector = data_vector[:4] - through @ data_vector[out]
+    to_epoch = np.eye(4)
+    to_epoch[2, 3] = -40.0  # (east, north, o, d) = to_epoch @ (east, north, a, d)
+    back = np.linalg.inv(to_epoch)
+    np.testing.assert_allclose(np.array(matrix), back.T @ expected @ back, rtol=1e-8, atol=1e-8)
+    np.testing.assert_allclose(np.array(vector), back.T @ expected_vector, rtol=1e-8, atol=1e-8)
 
 
 def test_data_only_is_none_where_the_data_say_nothing():

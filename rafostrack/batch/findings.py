@@ -24,12 +24,26 @@ by inverse variance,
 
 and the pooled value is judged by the rule of a float's check (`outcome_of`, with the
 tolerance and z-score of the runs' `[checks]`). A value no float alone is sure of, but
-their arrivals together contradict, is a finding too (`pooled`: k = 0). Tracks are not
-redone: the finding says which value to correct in the table before rerunning.
+their arrivals together contradict, is a finding too (`pooled`: k = 0).
+
+A source's position is pooled in information form: each float's arrivals alone say
+(J_k, h_k) of the source's corrections (east, north, offset, drift; a float hearing the
+source from one bearing fixes only a combination of them, J_k singular), and floats heard
+from other bearings complete each other,
+
+    J = sum J_k,    x = J^-1 sum h_k,    cov = J^-1,
+
+the pooled displacement judged along its direction like a float's (`Pooled.lat_lon`: the
+position the arrivals support). The arrivals are linear in the displacement only while it is
+small beside the ranges (the range's second-order term is d^2 / 2R across the bearing); a
+pool that puts the source farther than `LINEAR_LIMIT_KM` from its table position rests on
+directions the floats barely constrain and is undetermined. Tracks are not redone: the finding says which value to
+correct in the table before rerunning.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import statistics
@@ -39,8 +53,11 @@ from datetime import UTC, datetime
 from pathlib import Path, PurePath
 from typing import Any
 
-from ..calibrate.metadata_checks import CONTRADICTED, TOLERANCE_SETTING, outcome_of, undecided_note
+import numpy as np
+
+from ..calibrate.metadata_checks import CONTRADICTED, TOLERANCE_SETTING, UNDETERMINED, outcome_of, undecided_note
 from ..io.writers import csv_text
+from ..model.geodesy import displace
 from .plan import FAILED, SKIPPED, FloatOutcome
 
 FINDINGS_NAME = "metadata-findings.csv"
@@ -68,7 +85,8 @@ FINDINGS_COLUMNS = (
     "other_sources",
 )
 # The pooled fields and the [checks] tolerance that judges each.
-POOLED_TOLERANCE = {field: TOLERANCE_SETTING[field] for field in ("offset_s", "drift_s_per_day")}
+POOLED_TOLERANCE = {field: TOLERANCE_SETTING[field] for field in ("offset_s", "drift_s_per_day", "position")}
+LINEAR_LIMIT_KM = 100.0  # d^2 / 2R: 5 km at a range of 1000 km
 _SHOWN_FLOATS = 5  # float ids printed per finding (all of them are in the CSV)
 _DIGITS = {"s": 1, "km": 1, "s/day": 4, "deg": 4}
 
@@ -96,6 +114,7 @@ class Check:
     z_score: float | None = None
     alternatives: tuple[str, ...] = ()  # other fields of the row the arrivals would blame as well
     other_sources: tuple[str, ...] = ()  # other sources whose same field they would blame as well
+    information: Information | None = None  # a source position's: the float's arrivals on the source
 
     @property
     def key(self) -> tuple[str, str, str]:
@@ -110,6 +129,17 @@ class Check:
         if name in ("beacons.csv", "floats.csv"):
             return name == "beacons.csv"
         return self.id != self.float_id
+
+
+@dataclass(frozen=True)
+class Information:
+    """One float's arrivals on a source's (east km, north km, offset s, drift s/day)
+    corrections from the table values `at` (offset, drift): J (4, 4) and h (4,), as
+    `calibrate.metadata_checks.SourceInformation` writes them."""
+
+    matrix: tuple[tuple[float, ...], ...]
+    vector: tuple[float, ...]
+    at: tuple[float, float]
 
 
 @dataclass(frozen=True)
@@ -169,6 +199,10 @@ class Finding:
         given, supported = value_texts(self)
         if not self.contradicting and self.pooled is not None:
             pooled = f"{format_value(self.pooled.value, self.unit)} (sd {format_value(self.pooled.sd, self.unit)})"
+            if self.pooled.lat_lon is not None:
+                lat, lon = self.pooled.lat_lon
+                away, sd = format_value(self.pooled.value, self.unit), format_value(self.pooled.sd, self.unit)
+                pooled = f"{lat:.3f}, {lon:.3f} ({away} away, sd {sd})"
             return (
                 f"mission {self.mission}: {where}: {what}: given {given}; the arrivals of the {self.n_checked} floats "
                 f"that hear it support {pooled} together (none alone is sure)"
@@ -242,9 +276,27 @@ def parse_checks(run: Mapping[str, Any], float_id: str) -> list[Check]:
                 z_score=number(settings.get("z_score")),
                 alternatives=_names(entry.get("alternatives")),
                 other_sources=_names(entry.get("other_sources")),
+                information=_information(entry.get("information")),
             )
         )
     return checks
+
+
+def _information(value: Any) -> Information | None:
+    """A run.json `information` entry (None when missing or malformed)."""
+    if not isinstance(value, Mapping):
+        return None
+    try:
+        matrix = np.asarray(value["matrix"], dtype=float)
+        vector = np.asarray(value["vector"], dtype=float)
+        at = np.asarray(value["at"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        return None
+    if matrix.shape != (4, 4) or vector.shape != (4,) or at.shape != (2,):
+        return None
+    if not (np.isfinite(matrix).all() and np.isfinite(vector).all() and np.isfinite(at).all()):
+        return None
+    return Information(tuple(map(tuple, matrix.tolist())), tuple(vector.tolist()), (float(at[0]), float(at[1])))
 
 
 def number(value: Any) -> float | None:
@@ -291,21 +343,41 @@ def mission_findings(mission: str, checks: Iterable[Check]) -> list[Finding]:
         pooled = pooled_check(list(by_float.values()))
         if any(c.outcome == CONTRADICTED for c in by_float.values()) or (pooled and pooled.outcome == CONTRADICTED):
             findings.append(_finding(mission, by_float, pooled))
+    findings = with_position_named(findings)
     return sorted(findings, key=lambda f: (PurePath(f.file).name, f.line is None, f.line or 0, f.id, f.field))
+
+
+def with_position_named(findings: list[Finding]) -> list[Finding]:
+    """`findings`, a source's offset or drift naming its position as the other explanation
+    where the position is a finding too: a displaced source moves its arrivals by -u.d / c
+    (an offset while a float's bearing holds, a drift while it turns), so each float alone
+    may blame its timing for what the floats together put on its position."""
+    moved = {(PurePath(f.file).name, f.id) for f in findings if f.of_source and f.field == "position"}
+    return [
+        dataclasses.replace(f, alternatives=_union([f.alternatives, ("position",)]))
+        if f.field in ("offset_s", "drift_s_per_day") and (PurePath(f.file).name, f.id) in moved
+        else f
+        for f in findings
+    ]
 
 
 @dataclass(frozen=True)
 class Pooled:
-    """A source's value on every float's arrivals together (module docstring)."""
+    """A source's value on every float's arrivals together (module docstring); a position's
+    value is its distance from the table's (km), `lat_lon` the position."""
 
     value: float
     sd: float
     outcome: str
+    lat_lon: LatLon = None
 
 
 def pooled_check(checks: Sequence[Check]) -> Pooled | None:
-    """The inverse-variance pool of the floats' values of one source's offset or drift (None
-    for other fields, or without a float whose check has a value, an sd and its settings)."""
+    """The pool of the floats' values of one source's offset, drift (inverse variance) or
+    position (information form: `pooled_position`); None for other fields, or without a
+    float whose check has a value, an sd and its settings."""
+    if checks and checks[0].field == "position":
+        return pooled_position(checks)
     usable = [c for c in checks if c.of_source and _poolable(c)]
     if not usable or not isinstance(usable[0].given, float):
         return None
@@ -315,6 +387,38 @@ def pooled_check(checks: Sequence[Check]) -> Pooled | None:
     tolerance, z = float(usable[0].tolerance or 0.0), float(usable[0].z_score or 0.0)
     digits = 3 if usable[0].unit == "s" else 5
     return Pooled(round(value, digits), round(sd, digits), outcome_of(value - usable[0].given, sd, tolerance, z))
+
+
+def pooled_position(checks: Sequence[Check]) -> Pooled | None:
+    """A source's position on every float's arrivals together (module docstring); None
+    without two floats' information, settings or a given position, or where the floats
+    together do not fix all four corrections (J not positive definite)."""
+    usable = [c for c in checks if c.of_source and c.information is not None and c.given_lat_lon is not None]
+    usable = [c for c in usable if c.tolerance is not None and c.z_score is not None]
+    if len(usable) < 2:
+        return None
+    at = np.array(usable[0].information.at)  # type: ignore[union-attr]  # filtered above
+    matrix, vector = np.zeros((4, 4)), np.zeros(4)
+    for check in usable:
+        info = check.information
+        j_k = np.array(info.matrix)  # type: ignore[union-attr]
+        # Corrections from another float's table values (a rescheduled source): x = x_k + (at_k - at).
+        shift = np.concatenate([[0.0, 0.0], np.array(info.at) - at])  # type: ignore[union-attr]
+        matrix += j_k
+        vector += np.array(info.vector) + j_k @ shift  # type: ignore[union-attr]
+    matrix = 0.5 * (matrix + matrix.T)
+    if np.linalg.eigvalsh(matrix).min() <= 1e-12 * max(1.0, float(np.abs(matrix).max())):
+        return None
+    cov = np.linalg.inv(matrix)
+    shift_km = (cov @ vector)[:2]
+    distance = float(np.hypot(*shift_km))
+    direction = shift_km / distance if distance > 0 else np.array([1.0, 0.0])
+    sd = float(np.sqrt(direction @ cov[:2, :2] @ direction))
+    tolerance, z = float(usable[0].tolerance), float(usable[0].z_score)  # type: ignore[arg-type]
+    lat, lon = displace(np.array(usable[0].given_lat_lon[0]), np.array(usable[0].given_lat_lon[1]), *shift_km)  # type: ignore[index]
+    lat_lon = (round(float(lat), 4), round(float(lon), 4))
+    outcome = outcome_of(distance, sd, tolerance, z) if distance <= LINEAR_LIMIT_KM else UNDETERMINED
+    return Pooled(round(distance, 2), round(sd, 2), outcome, lat_lon)
 
 
 def _poolable(check: Check) -> bool:
@@ -347,7 +451,9 @@ def _finding(mission: str, by_float: Mapping[str, Check], pooled: Pooled | None 
         n_consistent=sum(c.outcome == "consistent" for c in by_float.values()),
         of_source=first.of_source,
         given_lat_lon=first.given_lat_lon,
-        supported_lat_lon=_median_lat_lon([c.supported_lat_lon for c in against]),
+        supported_lat_lon=_median_lat_lon([c.supported_lat_lon for c in against])
+        if against or pooled is None
+        else pooled.lat_lon,
         pooled=pooled,
         alternatives=_union(c.alternatives for c in against),
         other_sources=_union(c.other_sources for c in against),

@@ -57,6 +57,30 @@ TOLERANCE_SETTING = {
 }
 
 
+SOURCE_UNKNOWNS = ("east_km", "north_km", "offset_s", "drift_s_per_day")
+
+
+@dataclass(frozen=True)
+class SourceInformation:
+    """What one float's arrivals alone say of a source's corrections x = (east, north
+    displacement km, offset at the table's epoch s, drift s/day) from the table's values
+    (`at`): the information matrix J and vector h of the Gaussian exp(-x'Jx/2 + h'x), every
+    prior of the source taken out and the float's clock offsets marginalised,
+
+        J = J_xx - J_xc J_cc^+ J_cx,    h = h_x - J_xc J_cc^+ h_c.
+
+    J may be singular (a source heard from one bearing fixes only a combination of its
+    position and offset); the floats' arrivals are independent, so their J and h add."""
+
+    matrix: tuple[tuple[float, ...], ...]  # (4, 4), in the units of SOURCE_UNKNOWNS
+    vector: tuple[float, ...]  # (4,)
+    at: tuple[float, float]  # the offset_s and drift_s_per_day the corrections are from
+
+    def as_json(self) -> dict[str, Any]:
+        return {"unknowns": list(SOURCE_UNKNOWNS), "matrix": [list(r) for r in self.matrix],
+                "vector": list(self.vector), "at": list(self.at)}  # fmt: skip
+
+
 @dataclass(frozen=True)
 class MetadataCheck:
     """One table value against the arrivals (run.json `metadata_checks`, one entry each)."""
@@ -82,9 +106,14 @@ class MetadataCheck:
     # (a source scan's finding where these arrivals cannot tell which source's schedule is
     # wrong, `run.method._scanned_schedules`).
     other_sources: tuple[str, ...] = ()
+    # For a source's position: what these arrivals know of the source (`SourceInformation`),
+    # for a batch to pool over the floats that hear it.
+    information: SourceInformation | None = None
 
     def as_json(self) -> dict[str, Any]:
         entry = {k: v for k, v in asdict(self).items() if v is not None or k in ("given", "supported", "sd", "line")}
+        if self.information is not None:
+            entry["information"] = self.information.as_json()
         for empty in ("alternatives", "other_sources"):
             if not entry[empty]:
                 del entry[empty]
@@ -228,7 +257,7 @@ def timing_checks(
     post = _Posterior.of(problem, fit.unknowns, fit, priors, np.array(sorted(set(columns))))
     found = _fix_checks(problem, post, info, checks) + _clock_checks(problem, post, info, checks)
     timing = _source_checks(problem, post, priors, heard, mid_days, beacons, checks)
-    positions = position_checks(problem, fit, priors, heard, beacons, checks)
+    positions = position_checks(problem, fit, priors, heard, mid_days, beacons, checks)
     return found + with_position_alternative(timing, positions)
 
 
@@ -401,6 +430,7 @@ def position_checks(
     fit: kalman.KalmanFit,
     priors: kalman.KalmanPriors,
     heard: NDArray[np.intp],
+    mid_days: NDArray[np.float64],
     beacons: BeaconTable,
     checks: ChecksConfig,
 ) -> list[MetadataCheck]:
@@ -409,10 +439,12 @@ def position_checks(
     source the arrivals' estimate of its displacement with the priors of its position,
     offset and drift taken out (a displacement along the float's bearing is an offset; one
     across it shows only as the bearing changes: a source heard from one direction is
-    undetermined)."""
+    undetermined). Each check carries the arrivals' information on the source
+    (`SourceInformation`), which floats heard from other bearings complete."""
     moved = dataclasses.replace(problem, source_positions=True)
     start = fit.unknowns if problem.source_positions else np.concatenate([fit.unknowns, np.zeros(2 * problem.n_heard)])
-    columns = np.concatenate([moved.per_beacon(block) for block in (3, 4, 0, 1)])
+    clock = _clock_index(moved)
+    columns = np.concatenate([*(moved.per_beacon(block) for block in (3, 4, 0, 1)), clock])
     post = _Posterior.of(moved, start, fit, priors, columns)
     position_sd = position_prior_sd(moved, priors)
     offset_sd, drift_sd = timing_prior_sd(moved, priors)
@@ -423,7 +455,35 @@ def position_checks(
         arrivals = data_only(*post.block(index), prior_sd)
         file, line, name = beacon_source(beacons, int(row))
         given = (float(beacons.lat[row]), float(beacons.lon[row]))
-        found.append(
-            _shift_check(file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks.z_score)
+        check = _shift_check(
+            file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks.z_score
         )
+        information = source_information(
+            *post.block(index + clock), np.concatenate([prior_sd, _clock_sd(moved)]), float(mid_days[h])
+        )
+        at = (float(beacons.offset_s[row]), float(beacons.drift_s_per_day[row]))
+        found.append(dataclasses.replace(check, information=SourceInformation(*information, at=at)))
     return found
+
+
+def source_information(
+    mean: NDArray, cov: NDArray, prior_sd: NDArray, mid_day: float
+) -> tuple[tuple[tuple[float, ...], ...], tuple[float, ...]]:
+    """The arrivals' information (J, h) on a source's (east, north, offset at the epoch, drift)
+    from the posterior N(mean, cov) of (east, north, a, d, clock offsets) under a zero-mean
+    prior of sds `prior_sd` (`SourceInformation`): the prior's information taken out
+    (its mean is 0, so h = C^-1 mean is the arrivals' alone), the clocks marginalised, and
+    a (the offset at the float's mid-time, `mid_day` days from the epoch) mapped to the
+    offset at the epoch, o = a - d mid: with x = T^-1 x', J' = T^-T J T^-1, h' = T^-T h."""
+    info = np.linalg.inv(cov)
+    info_vector = info @ mean
+    info = info - np.diag(1.0 / np.asarray(prior_sd, dtype=float) ** 2)
+    j_xx, j_xc, j_cc = info[:4, :4], info[:4, 4:], info[4:, 4:]
+    through = j_xc @ np.linalg.pinv(0.5 * (j_cc + j_cc.T), rcond=1e-10, hermitian=True)
+    matrix = j_xx - through @ j_xc.T
+    vector = info_vector[:4] - through @ info_vector[4:]
+    to_epoch_inv = np.eye(4)
+    to_epoch_inv[2, 3] = mid_day  # a = o + d mid
+    matrix = to_epoch_inv.T @ (0.5 * (matrix + matrix.T)) @ to_epoch_inv
+    vector = to_epoch_inv.T @ vector
+    return tuple(tuple(float(v) for v in r) for r in matrix), tuple(float(v) for v in vector)
