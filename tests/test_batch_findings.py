@@ -20,6 +20,7 @@ from click.testing import CliRunner
 from support import simulated_mission_dir
 
 from rafostrack import batch as b
+from rafostrack.batch.corrections import SUPPORTED_NAME
 from rafostrack.batch.findings import (
     FINDINGS_COLUMNS,
     FINDINGS_NAME,
@@ -484,7 +485,7 @@ def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive
     out = tmp_path / "out"
     result = _batch(archive, out)
     assert result.exit_code == 0, result.output
-    assert out / FINDINGS_NAME in atomic_writes
+    assert out / FINDINGS_NAME in atomic_writes and not (out / "dimes" / SUPPORTED_NAME).exists()
     assert (out / FINDINGS_NAME).read_text() == ",".join(FINDINGS_COLUMNS) + "\n"
     assert not list(out.glob(".*.tmp"))
     assert "metadata findings: no table value contradicted" in (out / "batch.log").read_text()
@@ -492,7 +493,7 @@ def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive
     float_dir = out / "dimes" / "sim1"
     run = json.loads((float_dir / "run.json").read_text())
     run["metadata_checks"] = [
-        _entry(str(archive / "dimes" / "beacons.csv"), 3, "B1", "offset_s", 0.0, 30.5, "contradicted")
+        _entry(str(archive / "dimes" / "beacons.csv"), 2, "B1", "offset_s", 0.0, 30.5, "contradicted")
     ]
     (float_dir / "run.json").write_text(json.dumps(run))
     manifest = json.loads((float_dir / b.MANIFEST).read_text())
@@ -503,9 +504,15 @@ def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive
     assert result.exit_code == 0, result.output
     assert "1 skipped (1 unchanged)" in result.output
     line = (
-        "mission dimes: beacons.csv line 3: field 'offset_s' of source B1: given 0.0 s; "
+        "mission dimes: beacons.csv line 2: field 'offset_s' of source B1: given 0.0 s; "
         "the arrivals support 30.5 s on 1 of 1 floats that hear it (sim1)"
     )
     assert f"rafostrack batch: {line}" in result.stderr
     [row] = list(csv.DictReader((out / FINDINGS_NAME).open()))
     assert (row["mission"], row["id"], row["contradicting_floats"]) == ("dimes", "B1", "sim1")
+    # The one float that hears B1 decides it: the table with its offset replaced, the rest as given.
+    given = (archive / "dimes" / "beacons.csv").read_text().splitlines()
+    supported = (out / "dimes" / SUPPORTED_NAME).read_text().splitlines()
+    assert supported[0] == given[0] and supported[2:] == given[2:]
+    assert next(csv.DictReader(supported[:2]))["offset_s"] == "30.500"
+    assert f"{out / 'dimes' / SUPPORTED_NAME}: beacons.csv with the 1 value(s)" in (out / "batch.log").read_text()

@@ -12,8 +12,10 @@ One module per step, each stating in its docstring what it guarantees:
 - `lock`: one run at a time per OUT, by a kernel lock that a killed run cannot leave behind.
 - `report`: progress bar or plain lines, the summary table, `batch-summary.csv`, `batch.log`.
 - `findings`: the table values the arrivals contradict, per mission, a source's once for all
-  the floats that hear it, and a source's offset or drift on their arrivals together
-  (`metadata-findings.csv`).
+  the floats that hear it, and a source's offset, drift or position on their arrivals
+  together (`metadata-findings.csv`).
+- `corrections`: the beacon table with the values the mission's floats decide replaced
+  (`OUT/<mission>/beacons-supported.csv`), for the user to review and track with.
 - `overview`: the mission overview, which floats need a look and why (`overview.html`,
   `overview.csv`, `overview.png`; also `rafostrack summary OUT`).
 - `run`: `run_batch`, the whole run in order.

@@ -7,8 +7,9 @@ Guarantees:
   anything is written in OUT.
 - Everything that writes in OUT happens while holding OUT's lock (`lock.py`): first the
   temporary directories and files a killed run left in OUT are removed, then the floats are
-  planned and run, then `batch-summary.csv`, `metadata-findings.csv`, the mission overview
-  (`overview.html`, `overview.csv`, `overview.png`) and `batch.log` are written atomically.
+  planned and run, then `batch-summary.csv`, `metadata-findings.csv`, each mission's
+  `beacons-supported.csv` (`corrections.py`), the mission overview (`overview.html`,
+  `overview.csv`, `overview.png`) and `batch.log` are written atomically.
 - The result's exit code is 0 when no float failed, 1 when some did.
 """
 
@@ -29,6 +30,7 @@ from .. import __version__
 from ..config import load_config
 from ..errors import InputError
 from ..io.outdir import SIBLING
+from .corrections import write_supported_tables
 from .discover import Mission, discover
 from .findings import findings_csv
 from .lock import BatchLock
@@ -188,6 +190,7 @@ def _run_locked(
     reporter.lines.extend(table.splitlines())
     write_text_atomic(out / SUMMARY_NAME, summary_csv(outcomes))
     write_text_atomic(out / FINDINGS_NAME, findings_csv(findings))
+    write_supported_tables(findings, {m.name: m.path / "beacons.csv" for m in missions}, out, reporter.log)
     report_overview(reporter, outcomes, out, findings, plots=options.plots)
     write_text_atomic(out / LOG_NAME, "\n".join(reporter.lines) + "\n")
     return outcomes, table

@@ -1,0 +1,131 @@
+"""The beacon table the arrivals support: a mission's `beacons.csv` with the values its
+findings decide replaced, written as `OUT/<mission>/beacons-supported.csv` for the user to
+review and track with.
+
+A finding (`findings.Finding`) decides a source's value when the mission's floats agree
+that the table is wrong: their arrivals together contradict it (`pooled`), or more than
+half of the floats that checked it do (one float of two may have blamed the source for
+what is wrong in its own track). It is left to the user, not written, when the
+arrivals cannot tell which source's value is wrong (`other_sources`), and a source's offset
+or drift is left alone where the same source's position is decided (a displaced source
+shifts its arrivals like a wrong offset or drift: the position explains them). The value
+written is the pooled one where the pool contradicts the table, else the median over the
+contradicting floats.
+
+The table is the user's own text with only those cells changed (the same columns, rows,
+comments and line ends; a column the table lacks is added, empty on the other rows).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Callable, Sequence
+from pathlib import Path, PurePath
+
+from ..calibrate.metadata_checks import CONTRADICTED
+from .findings import Finding, table_place
+
+SUPPORTED_NAME = "beacons-supported.csv"
+_TIMING = ("offset_s", "drift_s_per_day")
+_DIGITS = {"offset_s": 3, "drift_s_per_day": 5, "lat": 4, "lon": 4}
+
+
+def decided(finding: Finding) -> bool:
+    """Whether the mission's floats agree that the source's table value is wrong (module
+    docstring), and on which source."""
+    if not finding.of_source or PurePath(finding.file).name != "beacons.csv" or finding.other_sources:
+        return False
+    pooled = finding.pooled is not None and finding.pooled.outcome == CONTRADICTED
+    return pooled or 2 * len(finding.contradicting) > finding.n_checked
+
+
+def to_correct(findings: Sequence[Finding]) -> list[Finding]:
+    """The findings whose values the supported table replaces (module docstring)."""
+    chosen = [f for f in findings if decided(f) and supported_cells(f)]
+    moved = {(f.mission, f.id) for f in chosen if f.field == "position"}
+    return [f for f in chosen if not (f.field in _TIMING and (f.mission, f.id) in moved)]
+
+
+def supported_cells(finding: Finding) -> dict[str, str]:
+    """The columns and texts a finding writes into its row (none when it has no value)."""
+    pooled = finding.pooled if finding.pooled is not None and finding.pooled.outcome == CONTRADICTED else None
+    if finding.field == "position":
+        lat_lon = pooled.lat_lon if pooled is not None else finding.supported_lat_lon
+        if lat_lon is None:
+            return {}
+        return {"lat": f"{lat_lon[0]:.{_DIGITS['lat']}f}", "lon": f"{lat_lon[1]:.{_DIGITS['lon']}f}"}
+    value = pooled.value if pooled is not None else finding.supported
+    if finding.field in _TIMING and isinstance(value, float):
+        return {finding.field: f"{value:.{_DIGITS[finding.field]}f}"}
+    if finding.field in ("start", "end") and isinstance(value, str):
+        return {finding.field: value}
+    return {}
+
+
+def supported_table(text: str, findings: Sequence[Finding]) -> str:
+    """`text` (a beacons.csv) with each finding's cells (`supported_cells`) in the row of
+    its line; ValueError when that line is not the finding's source's row (the table
+    changed since the floats were tracked)."""
+    lines = text.splitlines(keepends=True)
+    header = _fields(lines[0]) if lines else []
+    for finding in findings:
+        at = (finding.line or 0) - 1
+        row = _fields(lines[at]) if 0 < at < len(lines) else []
+        if (
+            "beacon_id" not in header
+            or header.index("beacon_id") >= len(row)
+            or row[header.index("beacon_id")] != finding.id
+        ):
+            raise ValueError(f"{table_place(finding.file, finding.line)} is not the row of source {finding.id}")
+        for column, cell in supported_cells(finding).items():
+            if column not in header:
+                header.append(column)
+            row += [""] * (len(header) - len(row))
+            row[header.index(column)] = cell
+        lines[at] = _line(row, lines[at])
+    lines[0] = _line(header, lines[0])
+    return "".join(lines)
+
+
+def _fields(line: str) -> list[str]:
+    return [cell.strip() for cell in next(csv.reader([line.rstrip("\r\n")]), [])]
+
+
+def _line(fields: list[str], original: str) -> str:
+    """`fields` as one CSV line with `original`'s line end."""
+    out = io.StringIO()
+    csv.writer(out, lineterminator="").writerow(fields)
+    return out.getvalue() + original[len(original.rstrip("\r\n")) :]
+
+
+def write_supported_tables(
+    findings: Sequence[Finding], beacons_of: dict[str, Path], out: Path, log: Callable[[str], None]
+) -> list[Path]:
+    """For each mission (`beacons_of`: mission name -> its beacons.csv) with values to
+    correct, OUT/<mission>/beacons-supported.csv, written atomically, with a line to `log`;
+    an old one is removed where there is none now (or the table changed since its floats
+    were tracked, which `log` is told). The files written."""
+    from ..io.atomic import write_text_atomic
+
+    chosen = to_correct(findings)
+    written = []
+    for mission, beacons in sorted(beacons_of.items()):
+        path = Path(out) / mission / SUPPORTED_NAME
+        mine = [f for f in chosen if f.mission == mission]
+        path.unlink(missing_ok=True)
+        if not mine:
+            continue
+        try:
+            with open(beacons, encoding="utf-8", newline="") as table:  # its own line ends
+                text = supported_table(table.read(), mine)
+        except (OSError, ValueError) as error:
+            log(f"mission {mission}: no {SUPPORTED_NAME}: {error}")
+            continue
+        write_text_atomic(path, text)
+        written.append(path)
+        log(
+            f"mission {mission}: {path}: {beacons.name} with the {len(mine)} value(s) its floats' arrivals decide "
+            f"({', '.join(f'{f.id} {f.field}' for f in mine)}); review it and track with it in place of {beacons.name}"
+        )
+    return written
