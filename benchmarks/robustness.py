@@ -670,9 +670,10 @@ def reference_rows(rows: list[dict[str, Any]], out_root: Path, files: list[Path]
 
 
 def mission_alarms(out_root: Path, files: list[Path]) -> dict[str, list[dict[str, Any]]]:
-    """Per mission, the values a batch finds contradicted (`batch.findings`: on one float or
-    more, or on their arrivals together: a source's offset, drift or position pooled over
-    the floats that hear it), as contradicted metadata_checks entries."""
+    """Per mission, the sources' values a batch finds contradicted (`batch.findings`: on one
+    float or more, or on their arrivals together: a source's offset, drift or position
+    pooled over the floats that hear it), as contradicted metadata_checks entries (a
+    floats.csv value is its float's own: not the mission's)."""
     checks: dict[str, list] = {}
     for f in files:
         run = json.loads((out_root / f.stem / "run.json").read_text())
@@ -688,6 +689,7 @@ def mission_alarms(out_root: Path, files: list[Path]) -> dict[str, list[dict[str
                 "other_sources": x.other_sources,
             }
             for x in mission_findings(mission, found)
+            if x.of_source
         ]
         for mission, found in checks.items()
     }
