@@ -11,26 +11,30 @@ from rafostrack.batch.findings import Finding, Pooled
 TABLE = "beacon_id,lat,lon,offset_s\r\nB1,-60.0,-70.0,300\r\nB2,-61.0,-72.0,900\r\n\r\nB3,-62.0,-74.0,1500\r\n"
 
 
-def _finding(id_: str, line: int, field: str, supported, k: int, n: int, **more) -> Finding:
+def _finding(id_: str, line: int, field: str, supported, k: int, n: int, mission: str = "dimes", **more) -> Finding:
     floats = tuple(f"f{i}" for i in range(k))
-    return Finding("dimes", "/m/dimes/beacons.csv", line, id_, field, "s", 0.0, supported, floats, n, 0, True, **more)
+    return Finding(mission, "/m/beacons.csv", line, id_, field, "s", 0.0, supported, floats, n, 0, True, **more)
 
 
-def test_a_value_is_decided_by_half_the_floats_or_their_pool_and_never_on_the_wrong_source():
-    offset = _finding("B1", 2, "offset_s", 330.0, 3, 4)  # 3 of 4 floats
-    weak = _finding("B2", 3, "offset_s", 930.0, 1, 2)  # 1 of 2: the other float saw nothing wrong
-    pooled = _finding("B2", 3, "drift_s_per_day", None, 0, 3, pooled=Pooled(0.03, 0.004, "contradicted"))
-    unsure = _finding("B3", 5, "offset_s", 1530.0, 2, 2, other_sources=("B1",))  # or B1's
+def test_a_value_is_decided_by_most_floats_or_their_pool_and_never_on_the_wrong_source():
+    """One mission per finding (a mission's table gets one value at a time)."""
+    offset = _finding("B1", 2, "offset_s", 330.0, 3, 4, mission="a")  # 3 of 4 floats
+    weak = _finding("B2", 3, "offset_s", 930.0, 1, 2, mission="b")  # 1 of 2: the other float saw nothing wrong
+    pooled = _finding("B2", 3, "drift_s_per_day", None, 0, 3, mission="c", pooled=Pooled(0.03, 0.004, "contradicted"))
+    unsure = _finding("B3", 5, "offset_s", 1530.0, 2, 2, mission="d", other_sources=("B1",))  # or B1's
     assert to_correct([offset, weak, pooled, unsure]) == [offset, pooled]
 
 
-def test_a_decided_position_explains_its_source_timing():
-    """B1's position is decided (its arrivals together put it 25 km away): B1's offset
-    finding is its echo and is not written; B2's offset stands."""
+def test_one_value_per_mission_the_strongest_and_a_decided_position_explains_its_source_timing():
+    """B1's position is decided on the floats' arrivals together, 8 sd away; B1's offset
+    finding is its echo and never written; B2's drift pool is 4 sd away (2 floats of 3
+    contradicting it come first, were there such a finding: `strength`). The position alone."""
     position = _finding("B1", 2, "position", 25.0, 0, 2, pooled=Pooled(25.0, 3.0, "contradicted", (-60.2, -69.8)))
-    echo = _finding("B1", 2, "offset_s", 320.0, 1, 2, alternatives=("position",))
-    other = _finding("B2", 3, "offset_s", 930.0, 2, 2)
-    assert to_correct([position, echo, other]) == [position, other]
+    echo = _finding("B1", 2, "offset_s", 320.0, 2, 2, alternatives=("position",))
+    drift = _finding("B2", 3, "drift_s_per_day", None, 0, 2, pooled=Pooled(0.02, 0.005, "contradicted"))
+    assert to_correct([echo, drift, position]) == [position]
+    most = _finding("B2", 3, "offset_s", 930.0, 2, 3)
+    assert to_correct([echo, drift, position, most]) == [most]
 
 
 def test_only_the_decided_cells_change_and_the_table_keeps_its_form():

@@ -12,6 +12,12 @@ shifts its arrivals like a wrong offset or drift: the position explains them). T
 written is the pooled one where the pool contradicts the table, else the median over the
 contradicting floats.
 
+One value per mission at a time, the strongest (the most floats agreeing, then the pooled
+value's distance from the table in its sds): a wrong value pulls the floats' fits and with
+them their checks of other sources, whose findings are its echoes (docs/decisions.md).
+Tracked with the corrected table, the floats' next findings give the next value, as
+calibration releases a float's contradicted values one at a time.
+
 The table is the user's own text with only those cells changed (the same columns, rows,
 comments and line ends; a column the table lacks is added, empty on the other rows).
 """
@@ -41,10 +47,26 @@ def decided(finding: Finding) -> bool:
 
 
 def to_correct(findings: Sequence[Finding]) -> list[Finding]:
-    """The findings whose values the supported table replaces (module docstring)."""
+    """The findings whose values the supported table replaces: per mission the strongest
+    decided one (module docstring)."""
     chosen = [f for f in findings if decided(f) and supported_cells(f)]
     moved = {(f.mission, f.id) for f in chosen if f.field == "position"}
-    return [f for f in chosen if not (f.field in _TIMING and (f.mission, f.id) in moved)]
+    chosen = [f for f in chosen if not (f.field in _TIMING and (f.mission, f.id) in moved)]
+    strongest: dict[str, Finding] = {}
+    for finding in chosen:
+        if finding.mission not in strongest or strength(finding) > strength(strongest[finding.mission]):
+            strongest[finding.mission] = finding
+    return [f for f in chosen if strongest[f.mission] is f]
+
+
+def strength(finding: Finding) -> tuple[bool, float]:
+    """How sure the mission's floats are: whether most of them contradict the value, then
+    its pooled correction in sds (0 without a contradicting pool)."""
+    pooled, z = finding.pooled, 0.0
+    if pooled is not None and pooled.outcome == CONTRADICTED and pooled.sd > 0:
+        given = finding.given if isinstance(finding.given, float) and finding.field != "position" else 0.0
+        z = abs(pooled.value - given) / pooled.sd
+    return 2 * len(finding.contradicting) > finding.n_checked, z
 
 
 def supported_cells(finding: Finding) -> dict[str, str]:
