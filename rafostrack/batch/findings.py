@@ -37,8 +37,10 @@ the pooled displacement judged along its direction like a float's (`Pooled.lat_l
 position the arrivals support). The arrivals are linear in the displacement only while it is
 small beside the ranges (the range's second-order term is d^2 / 2R across the bearing); a
 pool that puts the source farther than `LINEAR_LIMIT_KM` from its table position rests on
-directions the floats barely constrain and is undetermined. Tracks are not redone: the finding says which value to
-correct in the table before rerunning.
+directions the floats barely constrain and is undetermined.
+
+Tracks are not redone: a finding says which value to correct in the table before
+rerunning (`corrections` writes the table with the strongest one corrected).
 """
 
 from __future__ import annotations
@@ -55,7 +57,15 @@ from typing import Any
 
 import numpy as np
 
-from ..calibrate.metadata_checks import CONTRADICTED, TOLERANCE_SETTING, UNDETERMINED, outcome_of, undecided_note
+from ..calibrate.metadata_checks import (
+    CONTRADICTED,
+    TOLERANCE_SETTING,
+    UNDETERMINED,
+    SourceInformation,
+    along_itself,
+    outcome_of,
+    undecided_note,
+)
 from ..io.writers import csv_text
 from ..model.geodesy import displace
 from .plan import FAILED, SKIPPED, FloatOutcome
@@ -114,7 +124,7 @@ class Check:
     z_score: float | None = None
     alternatives: tuple[str, ...] = ()  # other fields of the row the arrivals would blame as well
     other_sources: tuple[str, ...] = ()  # other sources whose same field they would blame as well
-    information: Information | None = None  # a source position's: the float's arrivals on the source
+    information: SourceInformation | None = None  # a source position's: the float's arrivals on the source
 
     @property
     def key(self) -> tuple[str, str, str]:
@@ -129,17 +139,6 @@ class Check:
         if name in ("beacons.csv", "floats.csv"):
             return name == "beacons.csv"
         return self.id != self.float_id
-
-
-@dataclass(frozen=True)
-class Information:
-    """One float's arrivals on a source's (east km, north km, offset s, drift s/day)
-    corrections from the table values `at` (offset, drift): J (4, 4) and h (4,), as
-    `calibrate.metadata_checks.SourceInformation` writes them."""
-
-    matrix: tuple[tuple[float, ...], ...]
-    vector: tuple[float, ...]
-    at: tuple[float, float]
 
 
 @dataclass(frozen=True)
@@ -282,7 +281,7 @@ def parse_checks(run: Mapping[str, Any], float_id: str) -> list[Check]:
     return checks
 
 
-def _information(value: Any) -> Information | None:
+def _information(value: Any) -> SourceInformation | None:
     """A run.json `information` entry (None when missing or malformed)."""
     if not isinstance(value, Mapping):
         return None
@@ -296,7 +295,7 @@ def _information(value: Any) -> Information | None:
         return None
     if not (np.isfinite(matrix).all() and np.isfinite(vector).all() and np.isfinite(at).all()):
         return None
-    return Information(tuple(map(tuple, matrix.tolist())), tuple(vector.tolist()), (float(at[0]), float(at[1])))
+    return SourceInformation(tuple(map(tuple, matrix.tolist())), tuple(vector.tolist()), (float(at[0]), float(at[1])))
 
 
 def number(value: Any) -> float | None:
@@ -411,9 +410,7 @@ def pooled_position(checks: Sequence[Check]) -> Pooled | None:
         return None
     cov = np.linalg.inv(matrix)
     shift_km = (cov @ vector)[:2]
-    distance = float(np.hypot(*shift_km))
-    direction = shift_km / distance if distance > 0 else np.array([1.0, 0.0])
-    sd = float(np.sqrt(direction @ cov[:2, :2] @ direction))
+    distance, sd = along_itself(shift_km, cov[:2, :2])
     tolerance, z = float(usable[0].tolerance), float(usable[0].z_score)  # type: ignore[arg-type]
     lat, lon = displace(np.array(usable[0].given_lat_lon[0]), np.array(usable[0].given_lat_lon[1]), *shift_km)  # type: ignore[index]
     lat_lon = (round(float(lat), 4), round(float(lon), 4))

@@ -319,14 +319,19 @@ def _shift_check(
     if arrivals is None:
         return MetadataCheck(file, line, id_, field, 0.0, None, None, "km", UNDETERMINED, given_lat_lon=given)
     shift, cov = arrivals[0][:2], arrivals[1][:2, :2]
-    distance = float(np.hypot(*shift))
-    direction = shift / distance if distance > 0 else np.array([1.0, 0.0])
-    sd = float(np.sqrt(direction @ cov @ direction))
+    distance, sd = along_itself(shift, cov)
     outcome = outcome_of(distance, sd, tolerance_km, z_score)
     lat, lon = displace(np.array(given[0]), np.array(given[1]), shift[0], shift[1])
     supported = (round(float(lat), 4), round(float(lon), 4))
     return MetadataCheck(file, line, id_, field, 0.0, round(distance, 2), round(sd, 2), "km", outcome,
                          given_lat_lon=given, supported_lat_lon=supported)  # fmt: skip
+
+
+def along_itself(shift_km: NDArray, cov_km2: NDArray) -> tuple[float, float]:
+    """A displacement's length and its sd along its own direction (east if it is 0)."""
+    distance = float(np.hypot(*shift_km))
+    direction = shift_km / distance if distance > 0 else np.array([1.0, 0.0])
+    return distance, float(np.sqrt(direction @ cov_km2 @ direction))
 
 
 def _clock_checks(
