@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -162,8 +163,9 @@ def main() -> None:
             print(markdown_table(pd.DataFrame(summary[-1:])), flush=True)
     frame = pd.DataFrame(summary).sort_values(["set", "seed"], kind="stable")
     body = (
-        f"Each faulted mission of `{args.root.name}` tracked again with the beacon table its floats' findings "
-        f"support (`beacons-supported.csv`), in {time.perf_counter() - started:.0f} s with {args.workers} workers. "
+        "Each faulted mission of a `robustness.py --faults ... --out DIR` run tracked again with the beacon table "
+        f"its floats' findings support (`beacons-supported.csv`), in {time.perf_counter() - started:.0f} s with "
+        f"{args.workers} workers. "
         "Corrections: right where they are of an injected fault. Per accuracy target, the floats beyond it "
         "against the correct tables' run, faulted tables -> supported tables:\n\n"
         + markdown_table(frame)
@@ -171,7 +173,8 @@ def main() -> None:
     )
     print(body)
     if args.report:
-        write_section(args.report, "mission-refit", body)
+        argv = ["DIR" if arg == str(args.root) else arg for arg in sys.argv]  # not this machine's folder
+        write_section(args.report, "mission-refit", body, argv)
 
 
 if __name__ == "__main__":
