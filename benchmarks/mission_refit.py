@@ -32,6 +32,7 @@ import pandas as pd
 from report import markdown_table, write_section
 from robustness import (
     COVERAGE_RANGE,
+    as_contradicted,
     position_figures,
     read_truth,
     run_tasks,
@@ -85,8 +86,7 @@ def is_right(correction: Finding, mission: Path) -> bool:
     """Whether a correction is of an injected fault: it names the fault as a float's check
     would (`faults.names`: the same source, and its field or an alternative of it, such as
     an offset written for a displaced source whose position the floats could not fix)."""
-    entry = {"file": correction.file, "id": correction.id, "field": correction.field, "outcome": "contradicted",
-             "alternatives": correction.alternatives}  # fmt: skip
+    entry = as_contradicted(correction)
     return any(names(entry, fault) for fault in read_faults(mission / "truth" / "faults.json"))
 
 

@@ -75,7 +75,7 @@ import numpy as np
 import pandas as pd
 from report import markdown_table, write_section
 
-from rafostrack.batch.findings import mission_findings, parse_checks
+from rafostrack.batch.findings import Finding, mission_findings, parse_checks
 from rafostrack.batch.workers import single_threaded_math
 from rafostrack.config import with_overrides
 from rafostrack.domain import FloatInfo, Particles
@@ -679,19 +679,20 @@ def mission_alarms(out_root: Path, files: list[Path]) -> dict[str, list[dict[str
         run = json.loads((out_root / f.stem / "run.json").read_text())
         checks.setdefault(f.parent.name, []).extend(parse_checks(run, f.stem))
     return {
-        mission: [
-            {
-                "file": x.file,
-                "id": x.id,
-                "field": x.field,
-                "outcome": "contradicted",
-                "alternatives": x.alternatives,
-                "other_sources": x.other_sources,
-            }
-            for x in mission_findings(mission, found)
-            if x.of_source
-        ]
+        mission: [as_contradicted(x) for x in mission_findings(mission, found) if x.of_source]
         for mission, found in checks.items()
+    }
+
+
+def as_contradicted(finding: Finding) -> dict[str, Any]:
+    """A mission's finding as a contradicted metadata_checks entry (`faults.names` reads it)."""
+    return {
+        "file": finding.file,
+        "id": finding.id,
+        "field": finding.field,
+        "outcome": "contradicted",
+        "alternatives": finding.alternatives,
+        "other_sources": finding.other_sources,
     }
 
 

@@ -70,7 +70,8 @@ def test_source_information_is_what_the_arrivals_alone_say_of_the_source():
     info = whitened.T @ whitened + np.diag(np.concatenate([1.0 / prior_sd**2, 1.0 / kept_sd**2]))
     cov = np.linalg.inv(info)
     mean = cov @ whitened.T @ (y / 0.5)
-    matrix, vector = source_information(mean[:6], cov[:6, :6], prior_sd, mid_day=40.0)
+    information = source_information(mean[:6], cov[:6, :6], prior_sd, mid_day=40.0, at=(120.0, 0.0))
+    matrix, vector = information.matrix, information.vector
 
     data_info = whitened.T @ whitened + np.diag(np.concatenate([np.zeros(6), 1.0 / kept_sd**2]))
     data_vector = whitened.T @ (y / 0.5)

@@ -30,7 +30,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path, PurePath
 
 from ..calibrate.metadata_checks import CONTRADICTED
-from .findings import Finding, table_place
+from .findings import Finding, Pooled, table_place
 
 SUPPORTED_NAME = "beacons-supported.csv"
 _TIMING = ("offset_s", "drift_s_per_day")
@@ -42,8 +42,17 @@ def decided(finding: Finding) -> bool:
     docstring), and on which source."""
     if not finding.of_source or PurePath(finding.file).name != "beacons.csv" or finding.other_sources:
         return False
-    pooled = finding.pooled is not None and finding.pooled.outcome == CONTRADICTED
-    return pooled or 2 * len(finding.contradicting) > finding.n_checked
+    return _contradicting_pool(finding) is not None or _most_floats(finding)
+
+
+def _contradicting_pool(finding: Finding) -> Pooled | None:
+    """The finding's pool where it contradicts the table."""
+    return finding.pooled if finding.pooled is not None and finding.pooled.outcome == CONTRADICTED else None
+
+
+def _most_floats(finding: Finding) -> bool:
+    """Whether more than half of the floats that checked the value contradict it."""
+    return 2 * len(finding.contradicting) > finding.n_checked
 
 
 def to_correct(findings: Sequence[Finding]) -> list[Finding]:
@@ -62,16 +71,16 @@ def to_correct(findings: Sequence[Finding]) -> list[Finding]:
 def strength(finding: Finding) -> tuple[bool, float]:
     """How sure the mission's floats are: whether most of them contradict the value, then
     its pooled correction in sds (0 without a contradicting pool)."""
-    pooled, z = finding.pooled, 0.0
-    if pooled is not None and pooled.outcome == CONTRADICTED and pooled.sd > 0:
-        given = finding.given if isinstance(finding.given, float) and finding.field != "position" else 0.0
+    pooled, z = _contradicting_pool(finding), 0.0
+    if pooled is not None and pooled.sd > 0:
+        given = finding.given if isinstance(finding.given, float) else 0.0  # a position's: 0, its value the distance
         z = abs(pooled.value - given) / pooled.sd
-    return 2 * len(finding.contradicting) > finding.n_checked, z
+    return _most_floats(finding), z
 
 
 def supported_cells(finding: Finding) -> dict[str, str]:
     """The columns and texts a finding writes into its row (none when it has no value)."""
-    pooled = finding.pooled if finding.pooled is not None and finding.pooled.outcome == CONTRADICTED else None
+    pooled = _contradicting_pool(finding)
     if finding.field == "position":
         lat_lon = pooled.lat_lon if pooled is not None else finding.supported_lat_lon
         if lat_lon is None:

@@ -197,11 +197,11 @@ class Finding:
         what = f"field '{self.field}' of {'source ' if self.of_source else ''}{self.id}"
         given, supported = value_texts(self)
         if not self.contradicting and self.pooled is not None:
-            pooled = f"{format_value(self.pooled.value, self.unit)} (sd {format_value(self.pooled.sd, self.unit)})"
+            value, sd = format_value(self.pooled.value, self.unit), format_value(self.pooled.sd, self.unit)
+            pooled = f"{value} (sd {sd})"
             if self.pooled.lat_lon is not None:
                 lat, lon = self.pooled.lat_lon
-                away, sd = format_value(self.pooled.value, self.unit), format_value(self.pooled.sd, self.unit)
-                pooled = f"{lat:.3f}, {lon:.3f} ({away} away, sd {sd})"
+                pooled = f"{lat:.3f}, {lon:.3f} ({value} away, sd {sd})"
             return (
                 f"mission {self.mission}: {where}: {what}: given {given}; the arrivals of the {self.n_checked} floats "
                 f"that hear it support {pooled} together (none alone is sure)"

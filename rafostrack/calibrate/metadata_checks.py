@@ -463,19 +463,20 @@ def position_checks(
         check = _shift_check(
             file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks.z_score
         )
-        information = source_information(
-            *post.block(index + clock), np.concatenate([prior_sd, _clock_sd(moved)]), float(mid_days[h])
-        )
         at = (float(beacons.offset_s[row]), float(beacons.drift_s_per_day[row]))
-        found.append(dataclasses.replace(check, information=SourceInformation(*information, at=at)))
+        information = source_information(
+            *post.block(index + clock), np.concatenate([prior_sd, _clock_sd(moved)]), float(mid_days[h]), at
+        )
+        found.append(dataclasses.replace(check, information=information))
     return found
 
 
 def source_information(
-    mean: NDArray, cov: NDArray, prior_sd: NDArray, mid_day: float
-) -> tuple[tuple[tuple[float, ...], ...], tuple[float, ...]]:
+    mean: NDArray, cov: NDArray, prior_sd: NDArray, mid_day: float, at: tuple[float, float]
+) -> SourceInformation:
     """The arrivals' information (J, h) on a source's (east, north, offset at the epoch, drift)
-    from the posterior N(mean, cov) of (east, north, a, d, clock offsets) under a zero-mean
+    corrections from the table's offset and drift `at`, from the posterior N(mean, cov) of
+    (east, north, a, d, clock offsets) under a zero-mean
     prior of sds `prior_sd` (`SourceInformation`): the prior's information taken out
     (its mean is 0, so h = C^-1 mean is the arrivals' alone), the clocks marginalised, and
     a (the offset at the float's mid-time, `mid_day` days from the epoch) mapped to the
@@ -491,4 +492,4 @@ def source_information(
     to_epoch_inv[2, 3] = mid_day  # a = o + d mid
     matrix = to_epoch_inv.T @ (0.5 * (matrix + matrix.T)) @ to_epoch_inv
     vector = to_epoch_inv.T @ vector
-    return tuple(tuple(float(v) for v in r) for r in matrix), tuple(float(v) for v in vector)
+    return SourceInformation(tuple(tuple(float(v) for v in r) for r in matrix), tuple(float(v) for v in vector), at)
