@@ -120,8 +120,9 @@ def refit_set(seed_dir: Path, name: str, workers: int) -> tuple[pd.DataFrame, li
         for f in float_files(mission):
             row = {"float": f.stem, "refitted": f.stem in refitted}
             row |= {f"ok_{k}": v for k, v in figures(f, seed_dir / "out" / "correct" / "default").items()}
-            row |= figures(f, out)
-            after = figures(refitted[f.stem] / f.name, new_out) if f.stem in refitted else figures(f, out)
+            before = figures(f, out)
+            after = figures(refitted[f.stem] / f.name, new_out) if f.stem in refitted else before
+            row |= before
             row |= {f"new_{k}": v for k, v in after.items()}
             rows.append(row)
     return pd.DataFrame(rows), corrections
