@@ -21,6 +21,7 @@ not, they take over.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,6 +80,13 @@ class CandidateSearch:
     fine_km: float = 1.5
     n_peaks: int = 6
 
+    @functools.cached_property
+    def _widened(self) -> ArrivalLikelihood:
+        """The likelihood of the coarse grid: the TOA noise sd widened by its resolution."""
+        return self.arrivals.with_toa_sigma(
+            float(np.hypot(self.arrivals.model.toa_sigma_s, self.coarse_km / (2.0 * KM_PER_S)))
+        )
+
     def search(self, lat0: float, lon0: float, window: Window, clock_s: float | None = None) -> Candidates:
         """Every fine-grid position around the best coarse peaks within `radius_km` of
         (lat0, lon0), with its exact window log-likelihood (at the float clock correction
@@ -87,10 +95,7 @@ class CandidateSearch:
             return Candidates(np.zeros(0), np.zeros(0), np.zeros(0))
         east, north = _disc(self.radius_km, self.coarse_km)
         lat, lon = displace(np.full(len(east), lat0), np.full(len(east), lon0), east, north)
-        widened = self.arrivals.with_toa_sigma(
-            float(np.hypot(self.arrivals.model.toa_sigma_s, self.coarse_km / (2.0 * KM_PER_S)))
-        )
-        coarse = widened.evaluate(_at_clock(lat, lon, clock_s), window, marginals=False).loglik
+        coarse = self._widened.evaluate(_at_clock(lat, lon, clock_s), window, marginals=False).loglik
         peaks = _non_max_suppression(east, north, coarse, self.n_peaks, 2.0 * self.coarse_km)
         fe, fn = _disc(self.coarse_km, self.fine_km)
         e = (east[peaks][:, None] + fe[None, :]).ravel()
@@ -136,13 +141,12 @@ class Reseeding:
         its ancestor."""
         lat_c, lon_c, log_pi = self._mixture()
         s2 = self.sd_km**2
-        terms = []
-        for k in range(len(log_pi)):  # a few tens of components
-            east, north = local_offsets_km(particles.lat, particles.lon, lat_c[k], lon_c[k])
-            terms.append(log_pi[k] - (east * east + north * north) / (2.0 * s2) - np.log(2.0 * np.pi * s2))
+        # (components, particles): each particle's offsets in each component's tangent plane.
+        east, north = local_offsets_km(particles.lat[None, :], particles.lon[None, :], lat_c[:, None], lon_c[:, None])
+        terms = log_pi[:, None] - (east * east + north * north) / (2.0 * s2) - np.log(2.0 * np.pi * s2)
         # The velocity law is the drift's stationary one: its invariant density (flat in
         # position, zero for a model without velocity).
-        return np.logaddexp.reduce(np.array(terms), axis=0) + self.motion.log_invariant_density(particles)
+        return np.logaddexp.reduce(terms, axis=0) + self.motion.log_invariant_density(particles)
 
 
 @dataclass(frozen=True)

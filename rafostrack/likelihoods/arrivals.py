@@ -50,12 +50,30 @@ class ArrivalLikelihood(Likelihood):
         self.beacons = beacons
         self.info = info
         self.model = model
+        self._windows: dict[int, tuple[Window, m.WindowBeacons, m.SignalTerms | None]] = {}
 
     def with_toa_sigma(self, toa_sigma_s: float) -> ArrivalLikelihood:
         """A copy with the TOA noise sd set to `toa_sigma_s` (e.g. widened for a coarse grid)."""
         other = copy.copy(self)
         other.model = dataclasses.replace(self.model, toa_sigma_s=toa_sigma_s)
+        other._windows = {}
         return other
+
+    def window_terms(self, window: Window) -> tuple[m.WindowBeacons, m.SignalTerms | None]:
+        """What every evaluation of `window` shares, whatever the particles: its active
+        beacons with their delays (`measurement.window_beacons`) and, for the association
+        sum, its `measurement.signal_terms` (None for a likelihood without one). Kept per
+        window (a window is evaluated some ten times a pass: the filters, the labels, the
+        recovery search), for as long as this likelihood, whose table and model they are of."""
+        kept = self._windows.get(id(window))
+        if kept is None or kept[0] is not window:
+            kept = (window, m.window_beacons(self.beacons, self.info, window.time), self._signal_terms(window))
+            self._windows[id(window)] = kept
+        return kept[1], kept[2]
+
+    def _signal_terms(self, window: Window) -> m.SignalTerms | None:
+        """The window's `measurement.signal_terms`, where the likelihood sums associations."""
+        return None
 
     def label_probs(
         self, particles: Particles, weights: NDArray, window: Window
@@ -103,9 +121,8 @@ class RankedArrivals(ArrivalLikelihood):
 
     def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
         window = observation
-        wb, mu, p_detect = m.window_prediction(
-            self.beacons, self.info, self.model, particles.lat, particles.lon, window.time
-        )
+        wb, signals = self.window_terms(window)
+        mu, p_detect = m.beacon_prediction(wb, self.model, particles.lat, particles.lon)
         mu = with_particle_clock(mu, particles)
         if self._simulator is not None:
             time_ns = int(np.asarray(window.time, dtype="datetime64[ns]").astype(np.int64)) % (1 << 64)
@@ -124,10 +141,18 @@ class RankedArrivals(ArrivalLikelihood):
             model=self.model,
             ranked=self.ranked,
             source_log_ratio=self._source_log_ratio(window),
+            signals=signals,
         )
         assert self._sum is not None
         assoc = self._sum(factors.log_match, factors.log_unheard, marginals=marginals, log_echo=factors.log_echo)
         return Evidence(factors.log_base + assoc.log_z, wb.index, assoc.p_match if marginals else None)
+
+    def _signal_terms(self, window: Window) -> m.SignalTerms | None:
+        if self._simulator is not None:
+            return None
+        return m.signal_terms(
+            window.toa_s, max_signals=self.info.max_signals, window_s=self.info.window_s, model=self.model
+        )
 
     def _source_log_ratio(self, window: Window) -> NDArray | None:
         """The window's correlation heights as source-vs-clutter evidence, when configured."""

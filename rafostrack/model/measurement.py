@@ -123,8 +123,16 @@ def window_prediction(
     """The window's active beacons, and for positions (lat, lon) their predicted arrival
     times and detection probabilities, each (P, s)."""
     wb = window_beacons(beacons, info, time)
+    return (wb, *beacon_prediction(wb, model, lat, lon))
+
+
+def beacon_prediction(
+    wb: WindowBeacons, model: ModelConfig, lat: NDArray, lon: NDArray
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """For positions (lat, lon), the predicted arrival times and detection probabilities
+    of a window's beacons `wb`, each (P, s)."""
     ranges = beacon_ranges_m(lat, lon, wb)
-    return wb, predicted_toa_s(ranges, wb, model), detection_prob(ranges, wb, model)
+    return predicted_toa_s(ranges, wb, model), detection_prob(ranges, wb, model)
 
 
 def toa_logpdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
@@ -185,6 +193,33 @@ def horizon_s(toa_s: NDArray, max_signals: int, window_s: float) -> float | NDAr
     return toa[:, -1].copy() if full else np.full(len(toa), window_s)
 
 
+@dataclass(frozen=True)
+class SignalTerms:
+    """A window's terms that depend on its signals alone, shared by every particle and
+    beacon (module docstring): log Lambda, the horizon h, the shared term K log Lambda -
+    Lambda h, and the echo terms (`echo_factors`: the per-signal factor (1, K) or (P, K),
+    (0, K) without echoes, and log E_jj', None without)."""
+
+    log_intensity: float
+    horizon: float | NDArray[np.float64]
+    log_base: float | NDArray[np.float64]
+    no_echo: NDArray[np.float64]
+    log_echo: NDArray[np.float64] | None
+
+
+def signal_terms(toa_s: NDArray, *, max_signals: int, window_s: float, model: ModelConfig) -> SignalTerms:
+    """The `SignalTerms` of a window's stored arrival times `toa_s` (K,), or (P, K) for a
+    batch of windows (`association_factors`)."""
+    lam = clutter_intensity(model, window_s)
+    h = horizon_s(toa_s, max_signals, window_s)
+    k = np.shape(toa_s)[-1]
+    no_echo, log_echo = np.empty((0, k)), None
+    if model.echo_fraction > 0 and k:  # the echo terms' per-signal part joins log w_ij in the kernel
+        per_signal, log_echo = echo_factors(toa_s, h, lam, model)
+        no_echo = np.atleast_2d(per_signal)
+    return SignalTerms(float(np.log(lam)), h, k * np.log(lam) - lam * h, no_echo, log_echo)
+
+
 def association_factors(
     mu_s: NDArray,
     p_detect: NDArray,
@@ -195,6 +230,7 @@ def association_factors(
     model: ModelConfig,
     ranked: bool = True,
     source_log_ratio: NDArray | None = None,
+    signals: SignalTerms | None = None,
 ) -> AssociationFactors:
     """The window's factors w_ij, u_i and the shared term (see module docstring).
 
@@ -204,18 +240,15 @@ def association_factors(
     1 - Pd whatever its predicted arrival. `source_log_ratio` (K,): per signal, evidence
     that it came from a source rather than clutter (`rafostrack.likelihoods.quality`: its correlation
     height), added to every term that gives it to a source (w_ij, and E_jj' for an echo).
+    `signals`: the window's `signal_terms`, when the caller keeps them from one set of
+    particles to the next.
     """
-    lam = clutter_intensity(model, window_s)
-    h = horizon_s(toa_s, max_signals, window_s)
+    if signals is None:
+        signals = signal_terms(toa_s, max_signals=max_signals, window_s=window_s, model=model)
     mu = np.ascontiguousarray(mu_s, dtype=np.float64)
     n, s = mu.shape
     k = np.shape(toa_s)[-1]
     log_match, log_unheard = np.empty((n, s, k)), np.empty((n, s))
-    log_echo = None
-    signal_term = np.empty((0, k))
-    if model.echo_fraction > 0 and k:  # the echo terms' per-signal part joins log w_ij in the kernel
-        no_echo, log_echo = echo_factors(toa_s, h, lam, model)
-        signal_term = np.atleast_2d(no_echo)
     kernel = factors_kernel_threaded if threaded(n) else factors_kernel
     kernel(
         mu,
@@ -225,17 +258,18 @@ def association_factors(
         model.multipath_fraction,
         model.multipath_delay_s,
         model.multipath_delay_shape,
-        float(np.log(lam)),
-        np.atleast_1d(np.asarray(h, dtype=np.float64)),
+        signals.log_intensity,
+        np.atleast_1d(np.asarray(signals.horizon, dtype=np.float64)),
         ranked,
-        signal_term,
+        signals.no_echo,
         log_match,
         log_unheard,
     )
+    log_echo = signals.log_echo
     if source_log_ratio is not None and k:
         log_match = log_match + source_log_ratio[None, None, :]
         log_echo = None if log_echo is None else log_echo + source_log_ratio[None, :]
-    return AssociationFactors(log_match, log_unheard, k * np.log(lam) - lam * h, log_echo)
+    return AssociationFactors(log_match, log_unheard, signals.log_base, log_echo)
 
 
 def echo_factors(toa_s: NDArray, horizon: float | NDArray, lam: float, model: ModelConfig) -> tuple[NDArray, NDArray]:
