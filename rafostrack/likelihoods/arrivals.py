@@ -20,6 +20,7 @@ import copy
 import dataclasses
 import zlib
 from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +37,8 @@ from .quality import quality_log_ratio
 # marginals are recomputed for a reweighted (smoothed) cloud.
 NEGLIGIBLE_MASS = 1e-6
 
+T = TypeVar("T")
+
 
 def with_particle_clock(mu: NDArray[np.float64], particles: Particles) -> NDArray[np.float64]:
     """Predicted arrivals (P, s) with each particle's float clock correction added, where
@@ -50,7 +53,7 @@ class ArrivalLikelihood(Likelihood):
         self.beacons = beacons
         self.info = info
         self.model = model
-        self._windows: dict[int, tuple[Window, m.WindowBeacons, m.SignalTerms | None]] = {}
+        self._windows: dict[int, tuple[Window, Any]] = {}
 
     def with_toa_sigma(self, toa_sigma_s: float) -> ArrivalLikelihood:
         """A copy with the TOA noise sd set to `toa_sigma_s` (e.g. widened for a coarse grid)."""
@@ -59,21 +62,16 @@ class ArrivalLikelihood(Likelihood):
         other._windows = {}
         return other
 
-    def window_terms(self, window: Window) -> tuple[m.WindowBeacons, m.SignalTerms | None]:
-        """What every evaluation of `window` shares, whatever the particles: its active
-        beacons with their delays (`measurement.window_beacons`) and, for the association
-        sum, its `measurement.signal_terms` (None for a likelihood without one). Kept per
-        window (a window is evaluated some ten times a pass: the filters, the labels, the
-        recovery search), for as long as this likelihood, whose table and model they are of."""
+    def _per_window(self, window: Window, make: Callable[[Window], T]) -> T:
+        """`make(window)`: what every evaluation of `window` shares, whatever the particles
+        (its beacons and their delays, its signals' terms), made once and kept for as long
+        as this likelihood, whose table and model it is of. A window is evaluated some ten
+        times a pass: the filters, the labels, the recovery search."""
         kept = self._windows.get(id(window))
         if kept is None or kept[0] is not window:
-            kept = (window, m.window_beacons(self.beacons, self.info, window.time), self._signal_terms(window))
+            kept = (window, make(window))
             self._windows[id(window)] = kept
-        return kept[1], kept[2]
-
-    def _signal_terms(self, window: Window) -> m.SignalTerms | None:
-        """The window's `measurement.signal_terms`, where the likelihood sums associations."""
-        return None
+        return kept[1]
 
     def label_probs(
         self, particles: Particles, weights: NDArray, window: Window
@@ -121,7 +119,7 @@ class RankedArrivals(ArrivalLikelihood):
 
     def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
         window = observation
-        wb, signals = self.window_terms(window)
+        wb, signals = self._per_window(window, self._window_terms)
         mu, p_detect = m.beacon_prediction(wb, self.model, particles.lat, particles.lon)
         mu = with_particle_clock(mu, particles)
         if self._simulator is not None:
@@ -147,10 +145,12 @@ class RankedArrivals(ArrivalLikelihood):
         assoc = self._sum(factors.log_match, factors.log_unheard, marginals=marginals, log_echo=factors.log_echo)
         return Evidence(factors.log_base + assoc.log_z, wb.index, assoc.p_match if marginals else None)
 
-    def _signal_terms(self, window: Window) -> m.SignalTerms | None:
+    def _window_terms(self, window: Window) -> tuple[m.WindowBeacons, m.SignalTerms | None]:
+        """The window's active beacons and, for the association sum, its signals' terms."""
+        wb = m.window_beacons(self.beacons, self.info, window.time)
         if self._simulator is not None:
-            return None
-        return m.signal_terms(
+            return wb, None
+        return wb, m.signal_terms(
             window.toa_s, max_signals=self.info.max_signals, window_s=self.info.window_s, model=self.model
         )
 
@@ -174,22 +174,14 @@ class LabelledArrivals(ArrivalLikelihood):
 
     def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
         window = observation
-        if window.beacon_id is None:
-            raise InputError(
-                f"likelihood 'labeled' needs a beacon_id column in the arrival file of {self.info.float_id}"
-            )
-        rows = np.array(sorted({self._beacon_row[b] for b in window.beacon_id if b is not None}), dtype=np.intp)
-        wb = m.window_beacons(self.beacons, self.info, window.time, index=rows)
+        wb, label_index = self._per_window(window, self._window_labels)
+        assert window.beacon_id is not None  # `_window_labels` refuses a window without
         mu = m.predicted_toa_s(m.beacon_ranges_m(particles.lat, particles.lon, wb), wb, self.model)
         mu = with_particle_clock(mu, particles)
-        column = {int(r): c for c, r in enumerate(rows)}
-        label_index = np.array(
-            [column[self._beacon_row[b]] if b is not None else -1 for b in window.beacon_id], dtype=np.intp
-        )
         labelled = np.flatnonzero(label_index >= 0)
         p_match = None
         if marginals:
-            p_match = np.zeros((len(particles), len(rows), window.n_signals))
+            p_match = np.zeros((len(particles), len(wb.index), window.n_signals))
             p_match[:, label_index[labelled], labelled] = 1.0
         nearest = np.full(window.n_signals, 0.0)
         if len(labelled):
@@ -204,6 +196,18 @@ class LabelledArrivals(ArrivalLikelihood):
         )
         loglik = m.labeled_loglik(mu, window.toa_s, label_index, self.model, sigma_scale=scale)
         return Evidence(loglik, wb.index, p_match, warnings)
+
+    def _window_labels(self, window: Window) -> tuple[m.WindowBeacons, NDArray[np.intp]]:
+        """The window's labelled beacons (ascending table rows) and, per signal, its
+        beacon's column among them (-1: clutter)."""
+        if window.beacon_id is None:
+            raise InputError(
+                f"likelihood 'labeled' needs a beacon_id column in the arrival file of {self.info.float_id}"
+            )
+        rows = np.array(sorted({self._beacon_row[b] for b in window.beacon_id if b is not None}), dtype=np.intp)
+        column = {int(r): c for c, r in enumerate(rows)}
+        label_index = [column[self._beacon_row[b]] if b is not None else -1 for b in window.beacon_id]
+        return m.window_beacons(self.beacons, self.info, window.time, index=rows), np.array(label_index, dtype=np.intp)
 
 
 ArrivalFactory = Callable[[BeaconTable, FloatInfo, Config], ArrivalLikelihood]
