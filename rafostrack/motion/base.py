@@ -15,8 +15,9 @@ so a multi-day gap is one exact transition, not a chain of daily steps) and the 
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -38,6 +39,11 @@ class LinearGaussian:
     A: NDArray[np.float64]  # (d, d)
     b: NDArray[np.float64]  # (d,)
     L: NDArray[np.float64]  # (d, d), a square root of Q; singular where dt = 0
+    # `whitened`'s results by floor: a transition met again (the filters and smoothers ask
+    # for the same few intervals thousands of times) is whitened once.
+    _whitened: dict[float, tuple[NDArray[np.float64], float]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     @property
     def dim(self) -> int:
@@ -49,10 +55,17 @@ class LinearGaussian:
 
     def log_density(self, now: NDArray[np.float64], nxt: NDArray[np.float64], min_sd_km: float = 1e-3) -> NDArray:
         """log N(nxt; A now + b, Q) for states (P, d), elementwise (Q floored as in `whitening`)."""
-        white = self.whitening(min_sd_km)
+        white, log_det = self.whitened(min_sd_km)
         z = np.einsum("kl,pl->pk", white, nxt - np.einsum("kl,pl->pk", self.A, now) - self.b)
-        _, log_det = np.linalg.slogdet(white)
         return -0.5 * np.einsum("pk,pk->p", z, z) + log_det - 0.5 * self.dim * np.log(2.0 * np.pi)
+
+    def whitened(self, min_sd_km: float) -> tuple[NDArray[np.float64], float]:
+        """The `whitening` W (read-only) and log |W|."""
+        if min_sd_km not in self._whitened:
+            white = self.whitening(min_sd_km)
+            white.setflags(write=False)
+            self._whitened[min_sd_km] = white, float(np.linalg.slogdet(white)[1])
+        return self._whitened[min_sd_km]
 
     def whitening(self, min_sd_km: float) -> NDArray[np.float64]:
         """W with W (x' - A x - b) ~ N(0, I), for Q floored at `min_sd_km`^2 per axis (a
@@ -233,6 +246,10 @@ class JumpMixture(MotionModel):
 
     def jump(self) -> LinearGaussian:
         """g: position + N(0, R^2 I); velocity replaced by a stationary draw."""
+        return self._jump
+
+    @functools.cached_property
+    def _jump(self) -> LinearGaussian:
         r = self.jump_sd_km
         if not self.has_velocity:
             return LinearGaussian(A=np.eye(2), b=np.zeros(2), L=r * np.eye(2))

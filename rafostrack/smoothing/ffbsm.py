@@ -71,10 +71,10 @@ def whitened(
     for weight, kernel in components:
         if weight <= 0:
             continue
-        white = kernel.whitening(_MIN_SD_KM)
+        white, log_det = kernel.whitened(_MIN_SD_KM)
         za.append(np.einsum("km,im->ik", np.einsum("kl,lm->km", white, kernel.A), origins))
         zb.append(np.einsum("kl,jl->jk", white, destinations - kernel.b))
-        log_norm.append(np.log(weight) + float(np.linalg.slogdet(white)[1]) - 0.5 * kernel.dim * _LOG_2PI)
+        log_norm.append(np.log(weight) + log_det - 0.5 * kernel.dim * _LOG_2PI)
     return np.ascontiguousarray(za), np.ascontiguousarray(zb), np.array(log_norm)
 
 
