@@ -10,12 +10,15 @@ floats of each mission whose table changed tracked again with it (as
 `robustness.score_faulted` tracks), and each float's figures against the correct tables'
 run, before and after.
 
-    python benchmarks/mission_refit.py DIR [--workers 2] [--report docs/validation.md]
+    python benchmarks/mission_refit.py DIR [--rounds 2] [--from-round 2] [--workers 2] [--report docs/validation.md]
 
-Prints, per fault set and scenario seed, the corrections written (right: the injected
-fault's source and field; else a false correction) and the floats failing each accuracy
-target of the fault benchmark before and after; the tracks of the second round go to
-DIR/seed*/out/<set>+supported.
+Prints, per fault set and scenario seed, the corrections written in each round (right: the
+injected fault's source and field; else a false correction) and the floats failing each
+accuracy target of the fault benchmark before and after each round. Round k reads the
+findings of the tracks of the last table of each mission and writes its corrected copies
+to DIR/seed*/missions/<set>+supported[k], their tracks to DIR/seed*/out/<set>+supported[k]
+(no suffix number for round 1); `--from-round K` reads rounds before K from an earlier
+run instead of tracking them again.
 """
 
 from __future__ import annotations
@@ -98,32 +101,65 @@ def figures(float_file: Path, out: Path) -> dict[str, float]:
     return position_figures(track, truth)
 
 
-def refit_set(seed_dir: Path, name: str, workers: int) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
-    """One fault set of one seed: the corrections, the floats tracked again, and per float
-    its figures with correct tables (`ok_*`), faulted ones and the supported ones (`new_*`)."""
-    missions_dir, out = seed_dir / "missions" / name, seed_dir / "out" / name
-    new_missions, new_out = seed_dir / "missions" / f"{name}{SUFFIX}", seed_dir / "out" / f"{name}{SUFFIX}"
-    new_out.mkdir(parents=True, exist_ok=True)
-    corrections, tasks, refitted = [], [], {}
-    for mission in sorted(p for p in missions_dir.iterdir() if p.is_dir()):
-        chosen = mission_corrections(mission, out)
+def round_name(name: str, round_: int) -> str:
+    """The folder name of a fault set's round: the set itself (round 0, the tables as
+    faulted), then `<set>+supported`, `<set>+supported2`, ..."""
+    return name if round_ == 0 else f"{name}{SUFFIX}{'' if round_ == 1 else round_}"
+
+
+def latest(seed_dir: Path, name: str, mission: str, before: int) -> tuple[Path, Path]:
+    """A mission's latest table before round `before`: the folder of its copy (or the
+    original) and the outputs of its floats tracked with it."""
+    for k in range(before - 1, 0, -1):
+        copy = seed_dir / "missions" / round_name(name, k) / mission
+        if copy.is_dir():
+            return copy, seed_dir / "out" / round_name(name, k)
+    return seed_dir / "missions" / name / mission, seed_dir / "out" / name
+
+
+def refit_round(seed_dir: Path, name: str, round_: int, workers: int, track: bool) -> list[dict[str, Any]]:
+    """Round `round_` (from 1) of one fault set of one seed: per mission, the corrections
+    its floats' outputs of the last round support, and (with `track`) its floats tracked
+    again with the table so corrected; a mission without one keeps its last tracks."""
+    new_missions = seed_dir / "missions" / round_name(name, round_)
+    new_out = seed_dir / "out" / round_name(name, round_)
+    if track:  # nothing of an earlier run of this round: a mission without a correction has no copy
+        for folder in (new_missions, new_out):
+            shutil.rmtree(folder, ignore_errors=True)
+    corrections, tasks = [], []
+    for mission in sorted(p for p in (seed_dir / "missions" / name).iterdir() if p.is_dir()):
+        table, out = latest(seed_dir, name, mission.name, round_)
+        chosen = mission_corrections(table, out)
         corrections += [
-            {"mission": mission.name, "source": c.id, "field": c.field, "right": is_right(c, mission)} for c in chosen
+            {"mission": mission.name, "source": c.id, "field": c.field, "right": is_right(c, table)} for c in chosen
         ]
         if chosen:
-            copy = rewritten(mission, chosen, new_missions)
+            copy = rewritten(table, chosen, new_missions) if track else new_missions / mission.name
             tasks += [(f, new_out, ()) for f in float_files(copy)]
-            refitted.update({f.stem: copy for f in float_files(copy)})
-    run_tasks(score_faulted, tasks, workers)
+    if track:
+        new_out.mkdir(parents=True, exist_ok=True)
+        run_tasks(score_faulted, tasks, workers)
+    elif any(not (new_out / f.stem / "track.parquet").exists() for f, _, _ in tasks):
+        raise SystemExit(f"{new_out}: round {round_} was not tracked; run it (--from-round {round_} or lower)")
+    return corrections
+
+
+def refit_set(
+    seed_dir: Path, name: str, rounds: int, workers: int, from_round: int
+) -> tuple[pd.DataFrame, list[list[dict[str, Any]]]]:
+    """One fault set of one seed, `rounds` rounds (those before `from_round` read from an
+    earlier run, not tracked): each round's corrections, and per float its figures with
+    correct tables (`ok_*`), faulted ones and after each round (`r1_*`, `r2_*`, ...)."""
+    corrections = [refit_round(seed_dir, name, k, workers, k >= from_round) for k in range(1, rounds + 1)]
     rows = []
-    for mission in sorted(p for p in missions_dir.iterdir() if p.is_dir()):
+    for mission in sorted(p for p in (seed_dir / "missions" / name).iterdir() if p.is_dir()):
         for f in float_files(mission):
-            row = {"float": f.stem, "refitted": f.stem in refitted}
+            row: dict[str, Any] = {"float": f.stem}
             row |= {f"ok_{k}": v for k, v in figures(f, seed_dir / "out" / "correct" / "default").items()}
-            before = figures(f, out)
-            after = figures(refitted[f.stem] / f.name, new_out) if f.stem in refitted else before
-            row |= before
-            row |= {f"new_{k}": v for k, v in after.items()}
+            row |= figures(f, seed_dir / "out" / name)
+            for k in range(1, rounds + 1):
+                table, out = latest(seed_dir, name, mission.name, k + 1)
+                row |= {f"r{k}_{key}": v for key, v in figures(table / f.name, out).items()}
             rows.append(row)
     return pd.DataFrame(rows), corrections
 
@@ -134,10 +170,22 @@ def failing(table: pd.DataFrame, prefix: str = "") -> dict[str, list[str]]:
     return {target: list(view.loc[view.apply(test, axis=1), "float"]) for target, test in TARGETS.items()}
 
 
+def _spent(seconds: float, args: argparse.Namespace) -> str:
+    """What this run tracked, and in how long."""
+    if args.from_round > args.rounds:
+        return "Every round read from earlier runs of this script (none tracked in this one). "
+    earlier = f"; rounds before {args.from_round} read from an earlier run" if args.from_round > 1 else ""
+    return f"Rounds {args.from_round}-{args.rounds} tracked in {seconds:.0f} s with {args.workers} workers{earlier}. "
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("root", type=Path, help="a robustness.py --faults --out directory")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--rounds", type=int, default=1, help="corrections and tracking again, this many times")
+    parser.add_argument(
+        "--from-round", type=int, default=1, help="read the rounds before this one from an earlier run of DIR"
+    )
     parser.add_argument("--report", type=Path, help="write the results into this Markdown file's mission-refit section")
     args = parser.parse_args()
     started = time.perf_counter()
@@ -145,30 +193,35 @@ def main() -> None:
     for seed_dir in sorted(args.root.glob("seed*")):
         sets = sorted(p.name for p in (seed_dir / "missions").iterdir() if p.name != "correct" and SUFFIX not in p.name)
         for name in sets:
-            table, corrections = refit_set(seed_dir, name, args.workers)
-            before, after = failing(table), failing(table, "new_")
-            right = sum(c["right"] for c in corrections)
+            table, corrections = refit_set(seed_dir, name, args.rounds, args.workers, args.from_round)
+            stages = ["", *(f"r{k}_" for k in range(1, args.rounds + 1))]
+            beyond = [failing(table, stage) for stage in stages]
+            seed = seed_dir.name.removeprefix("seed")
             summary.append(
                 {
                     "set": name,
-                    "seed": seed_dir.name.removeprefix("seed"),
-                    "corrections": f"{right} right, {len(corrections) - right} false",
-                    "floats tracked again": int(table["refitted"].sum()),
-                    **{t: f"{len(before[t])} -> {len(after[t])}" for t in TARGETS},
-                    "RMSE km (median)": f"{table['rmse_km'].median():.1f} -> {table['new_rmse_km'].median():.1f}",
+                    "seed": seed,
+                    "corrections (right/false) per round": ", ".join(
+                        f"{sum(c['right'] for c in done)}/{sum(not c['right'] for c in done)}" for done in corrections
+                    ),
+                    **{t: " -> ".join(str(len(b[t])) for b in beyond) for t in TARGETS},
+                    "RMSE km (median)": " -> ".join(f"{table[f'{stage}rmse_km'].median():.1f}" for stage in stages),
                 }
             )
-            false = [f"{c['mission']} {c['source']} {c['field']}" for c in corrections if not c["right"]]
-            if false:
-                lines.append(f"- {name}, seed {summary[-1]['seed']}: false corrections: {'; '.join(false)}")
+            for k, done in enumerate(corrections, 1):
+                false = [f"{c['mission']} {c['source']} {c['field']}" for c in done if not c["right"]]
+                if false:
+                    lines.append(f"- {name}, seed {seed}, round {k}: false corrections: {'; '.join(false)}")
             print(markdown_table(pd.DataFrame(summary[-1:])), flush=True)
     frame = pd.DataFrame(summary).sort_values(["set", "seed"], kind="stable")
     body = (
         "Each faulted mission of a `robustness.py --faults ... --out DIR` run tracked again with the beacon table "
-        f"its floats' findings support (`beacons-supported.csv`), in {time.perf_counter() - started:.0f} s with "
-        f"{args.workers} workers. "
-        "Corrections: right where they are of an injected fault. Per accuracy target, the floats beyond it "
-        "against the correct tables' run, faulted tables -> supported tables:\n\n"
+        f"its floats' findings support (`beacons-supported.csv`), {args.rounds} round(s): each round corrects, per "
+        "mission, the value its floats' outputs of the last round decide, and tracks the mission's floats again "
+        "with it (a mission without one keeps its tracks). "
+        + _spent(time.perf_counter() - started, args)
+        + "Corrections: right where they are of an injected fault. Per accuracy target, the floats beyond it "
+        "against the correct tables' run: faulted tables -> after each round:\n\n"
         + markdown_table(frame)
         + ("\n\n" + "\n".join(lines) if lines else "")
     )
