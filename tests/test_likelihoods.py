@@ -11,7 +11,7 @@ import pytest
 from rafostrack.config import load_config, with_overrides
 from rafostrack.domain import Particles
 from rafostrack.engines import exact
-from rafostrack.likelihoods import RankedArrivals, fix_loglik
+from rafostrack.likelihoods import RankedArrivals, arrivals_from_config, fix_loglik
 from rafostrack.model import measurement as m
 from rafostrack.problem import FloatProblem
 from rafostrack.run.method import track_record
@@ -55,6 +55,31 @@ def test_ranked_component_is_the_model_factors_summed_by_the_engine(sim_mission,
         atol=1e-12,
     )
     assert evidence.p_match.shape == (50, len(wb.index), window.n_signals)
+
+
+@pytest.mark.parametrize("likelihood", ["ranked", "labeled"])
+def test_a_likelihood_evaluated_window_after_window_gives_what_a_fresh_one_does(sim_mission, likelihood):
+    """What a likelihood keeps of a window from one evaluation to the next (its beacons, its
+    signals' terms, its labels) is that window's: windows evaluated in turn, again, and by a
+    copy with another TOA sd give the bits that a likelihood made for each evaluation gives."""
+    sim = sim_mission.floats[0]
+    config = with_overrides(load_config(), filter={"likelihood": likelihood})
+    windows = [w for w in sim.record.windows if w.n_signals >= 2][:3]
+    rng = np.random.default_rng(2)
+    particles = Particles(
+        sim.truth["lat"].iloc[5] + rng.normal(0, 0.05, 40), sim.truth["lon"].iloc[5] + rng.normal(0, 0.05, 40)
+    )
+
+    def fresh():
+        return arrivals_from_config(sim_mission.beacons, sim.info, config)
+
+    kept = fresh()
+    for window in [*windows, *reversed(windows)]:
+        assert np.array_equal(kept.evaluate(particles, window).loglik, fresh().evaluate(particles, window).loglik)
+    wide, wide_fresh = kept.with_toa_sigma(5.0), fresh().with_toa_sigma(5.0)
+    for window in windows:
+        assert np.array_equal(wide.evaluate(particles, window).loglik, wide_fresh.evaluate(particles, window).loglik)
+    assert not np.array_equal(wide.evaluate(particles, windows[0]).loglik, kept.evaluate(particles, windows[0]).loglik)
 
 
 def test_a_wild_hand_label_is_widened_not_collapsed_onto(sim_mission):
