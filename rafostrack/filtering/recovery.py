@@ -34,7 +34,6 @@ from ..motion import MotionModel
 from .resampling import log_sum_exp
 
 KM_PER_S = 1.48  # travel distance per second of arrival time, for sizing the grids
-_BLOCK_ELEMENTS = 1 << 16  # (component, particle) pairs per block of `Reseeding.log_density`
 
 
 @dataclass(frozen=True)
@@ -142,18 +141,13 @@ class Reseeding:
         its ancestor."""
         lat_c, lon_c, log_pi = self._mixture()
         s2 = self.sd_km**2
-        lat, lon = particles.lat[None, :], particles.lon[None, :]
-        log_q = np.full(len(particles), -np.inf)
-        step = max(1, _BLOCK_ELEMENTS // len(particles))
-        for block in range(0, len(log_pi), step):  # (components, particles), a block of components at a time
-            at = slice(block, block + step)
-            east, north = local_offsets_km(lat, lon, lat_c[at, None], lon_c[at, None])
-            terms = log_pi[at, None] - (east * east + north * north) / (2.0 * s2) - np.log(2.0 * np.pi * s2)
-            # logaddexp's reduction runs down the components in order: block by block, the same sum.
-            log_q = np.logaddexp.reduce(np.concatenate([log_q[None, :], terms]), axis=0)
+        terms = []
+        for k in range(len(log_pi)):  # per component: numpy's vectorised sin and cos differ in the last bit
+            east, north = local_offsets_km(particles.lat, particles.lon, lat_c[k], lon_c[k])
+            terms.append(log_pi[k] - (east * east + north * north) / (2.0 * s2) - np.log(2.0 * np.pi * s2))
         # The velocity law is the drift's stationary one: its invariant density (flat in
         # position, zero for a model without velocity).
-        return log_q + self.motion.log_invariant_density(particles)
+        return np.logaddexp.reduce(np.array(terms), axis=0) + self.motion.log_invariant_density(particles)
 
 
 @dataclass(frozen=True)
