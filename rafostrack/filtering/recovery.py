@@ -49,12 +49,17 @@ class Candidates:
         return float(self.loglik.max()) if len(self.loglik) else -np.inf
 
 
+@functools.lru_cache(maxsize=16)
 def _disc(radius_km: float, step_km: float) -> tuple[NDArray, NDArray]:
-    """East/north offsets of a square grid of spacing `step_km` inside a disc."""
+    """East/north offsets of a square grid of spacing `step_km` inside a disc (read-only:
+    made once per grid, every search uses the same two)."""
     k = np.arange(-np.floor(radius_km / step_km), np.floor(radius_km / step_km) + 1) * step_km
     east, north = np.meshgrid(k, k)
     inside = east**2 + north**2 <= radius_km**2
-    return east[inside], north[inside]
+    east, north = east[inside], north[inside]
+    for offsets in (east, north):
+        offsets.setflags(write=False)
+    return east, north
 
 
 def _non_max_suppression(east: NDArray, north: NDArray, score: NDArray, k: int, min_km: float) -> NDArray[np.intp]:
