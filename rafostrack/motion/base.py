@@ -244,12 +244,9 @@ class JumpMixture(MotionModel):
     def jump_probability(self, dt_days: float) -> float:
         return float(-np.expm1(-self.jump_rate_per_day * max(dt_days, 0.0)))
 
-    def jump(self) -> LinearGaussian:
-        """g: position + N(0, R^2 I); velocity replaced by a stationary draw."""
-        return self._jump
-
     @functools.cached_property
-    def _jump(self) -> LinearGaussian:
+    def jump(self) -> LinearGaussian:
+        """g: position + N(0, R^2 I); velocity replaced by a stationary draw (made once)."""
         r = self.jump_sd_km
         if not self.has_velocity:
             return LinearGaussian(A=np.eye(2), b=np.zeros(2), L=r * np.eye(2))
@@ -260,7 +257,7 @@ class JumpMixture(MotionModel):
 
     def components(self, dt_days: float) -> list[tuple[float, LinearGaussian]]:
         eps = self.jump_probability(dt_days)
-        return [(1.0 - eps, self.base.transition(dt_days)), (eps, self.jump())]
+        return [(1.0 - eps, self.base.transition(dt_days)), (eps, self.jump)]
 
     def initial(self, lat: float, lon: float, sd_km: float, n: int, rng: np.random.Generator) -> Particles:
         return self.base.initial(lat, lon, sd_km, n, rng)
@@ -271,7 +268,7 @@ class JumpMixture(MotionModel):
         jumps = np.flatnonzero(rng.random(len(particles)) < self.jump_probability(dt_days))
         if len(jumps) == 0:
             return moved
-        jumped = _Kernel(self.jump(), self.has_velocity).step(particles.take(jumps), rng)
+        jumped = _Kernel(self.jump, self.has_velocity).step(particles.take(jumps), rng)
         return moved.replace_at(jumps, jumped)
 
 
