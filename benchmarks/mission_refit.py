@@ -93,10 +93,9 @@ def is_right(correction: Finding, mission: Path) -> bool:
     return any(names(entry, fault) for fault in read_faults(mission / "truth" / "faults.json"))
 
 
-def figures(float_file: Path, out: Path) -> dict[str, float]:
+def figures(truth: pd.DataFrame, float_id: str, out: Path) -> dict[str, float]:
     """A stored track's figures against the float's truth (`robustness.position_figures`)."""
-    truth, _ = read_truth(float_file)
-    track = pd.read_parquet(out / float_file.stem / "track.parquet")
+    track = pd.read_parquet(out / float_id / "track.parquet")
     track["time"] = track["time"].dt.tz_localize(None)  # stored in UTC; the truth's are naive UTC
     return position_figures(track, truth)
 
@@ -154,12 +153,13 @@ def refit_set(
     rows = []
     for mission in sorted(p for p in (seed_dir / "missions" / name).iterdir() if p.is_dir()):
         for f in float_files(mission):
+            truth, _ = read_truth(f)
             row: dict[str, Any] = {"float": f.stem}
-            row |= {f"ok_{k}": v for k, v in figures(f, seed_dir / "out" / "correct" / "default").items()}
-            row |= figures(f, seed_dir / "out" / name)
+            row |= {f"ok_{k}": v for k, v in figures(truth, f.stem, seed_dir / "out" / "correct" / "default").items()}
+            row |= figures(truth, f.stem, seed_dir / "out" / name)
             for k in range(1, rounds + 1):
-                table, out = latest(seed_dir, name, mission.name, k + 1)
-                row |= {f"r{k}_{key}": v for key, v in figures(table / f.name, out).items()}
+                _, out = latest(seed_dir, name, mission.name, k + 1)
+                row |= {f"r{k}_{key}": v for key, v in figures(truth, f.stem, out).items()}
             rows.append(row)
     return pd.DataFrame(rows), corrections
 
