@@ -135,6 +135,9 @@ class ArrivalRecord:
     float_id: str
     path: Path
     windows: tuple[Window, ...]
+    # The TOAs the reader dropped as later than the float's window_s: evidence that the
+    # float listened longer than its table says (`calibrate.window_check`).
+    late_toa_s: tuple[float, ...] = ()
 
     @property
     def has_labels(self) -> bool:

@@ -7,6 +7,7 @@ value given) and the track uses the arrivals' value; right tables give no warnin
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,7 +28,11 @@ from rafostrack.calibrate.metadata_checks import (
     with_position_alternative,
 )
 from rafostrack.calibrate.source_scan import schedule_candidates
+from rafostrack.calibrate.window_check import MIN_LATE_TOAS, TOO_SHORT_NOTE, window_check, with_supported_window
 from rafostrack.config import load_config, with_overrides
+from rafostrack.domain import ArrivalRecord, Window
+from rafostrack.errors import Warnings
+from rafostrack.io.records import csv_names, window_arrivals
 from rafostrack.model.geodesy import displace
 from rafostrack.problem import FloatProblem
 from rafostrack.run.method import track_record
@@ -150,6 +155,10 @@ def test_a_scanned_schedule_that_another_source_explains_as_well_names_both():
 def simulated():
     """A 60-day float whose clock drifts 9 s, and a first-pass estimate made of its truth
     (true track, true labels at probability 1)."""
+    return _simulated()
+
+
+def _simulated():
     beacons, (info,) = synthetic_scenario(days=60, rng=11)
     info = dataclasses.replace(info, clock_offset_start_s=0.0, clock_offset_end_s=TRUE_END_CLOCK_S, max_signals=8,
                                source=("floats.csv", 2))  # fmt: skip
@@ -178,6 +187,88 @@ def test_right_tables_raise_no_warning(simulated):
     fid = simulated[3].float_id
     assert {(fid, "launch_fix"), (fid, "end_fix"), (fid, "clock_offset_end_s"), ("B1", "offset_s")} <= set(checks)
     assert checks[(fid, "clock_offset_end_s")].outcome == CONSISTENT
+    assert checks[(fid, "window_s")].outcome == CONSISTENT
+
+
+@pytest.fixture(scope="module")
+def cluttered():
+    """The float of `simulated` storing up to 12 signals in windows of 2 clutter signals on
+    average: enough windows listened to their end, with enough clutter, to bound their
+    length (60 days of `simulated` hold 23 such windows at 0.5 clutter signals each, too few
+    to tell a window 40% too long: undetermined)."""
+    _, _, beacons, info = _simulated()
+    info = dataclasses.replace(info, max_signals=12)
+    model = dataclasses.replace(CONFIG.model, toa_sigma_s=1.0, clutter_rate=2.0)
+    sim = simulate_mission(beacons, [info], model, np.random.default_rng(12)).floats[0]
+    return truth_estimate(sim), sim.record, beacons, sim.info
+
+
+def test_a_window_too_long_is_named_and_the_track_uses_the_arrivals_one(cluttered):
+    """window_s 40% longer than the float listened: contradicted, the latest TOA supported
+    and tracked with, the clutter per second as with the right window (`calibrate.window_check`)."""
+    info = cluttered[3]
+    latest = max(float(w.toa_s[-1]) for w in cluttered[1].windows if w.n_signals)
+    right, _ = _checked(cluttered)
+    assert right.info.window_s == info.window_s
+    calibration, checks = _checked(cluttered, {"window_s": 1.4 * info.window_s})
+    check = checks[(info.float_id, "window_s")]
+    assert check.outcome == CONTRADICTED and check.supported == check.used == np.ceil(latest)
+    assert info.window_s - 60.0 < check.supported <= info.window_s
+    assert calibration.info.window_s == check.supported
+    rate = ("model", "clutter_rate")
+    per_second = calibration.values[rate] / calibration.info.window_s
+    assert per_second == pytest.approx(right.values[rate] / info.window_s, rel=0.05)
+    (warning,) = warnings_of(calibration.checks)
+    assert warning == (
+        f"floats.csv: line 2: field 'window_s' of {info.float_id}: given {1.4 * info.window_s:.4g} s; "
+        f"the arrivals support {check.supported:.4g} s; tracked with the arrivals' value"
+    )
+
+
+def test_a_window_too_short_is_named_with_what_to_do(simulated):
+    """window_s 30% shorter than the float listened: the reader drops the later TOAs, the
+    check names the window and the latest of them; the track keeps the given window."""
+    _, record, beacons, info = simulated
+    short = dataclasses.replace(info, window_s=0.7 * info.window_s)
+    times = np.repeat([w.time for w in record.windows], [max(w.n_signals, 1) for w in record.windows])
+    toa = np.concatenate([w.toa_s if w.n_signals else [np.nan] for w in record.windows])
+    warnings = Warnings()
+    reread = window_arrivals(Path("sim1.csv"), short, beacons, times, toa, warnings, csv_names(np.arange(len(toa)) + 2))
+    late = toa[toa > short.window_s]
+    assert reread.late_toa_s == tuple(np.sort(late)) and len(late) >= MIN_LATE_TOAS
+    check = window_check(reread, short, 0.5, CONFIG.checks.launch_z_score)
+    assert check.outcome == CONTRADICTED and check.supported == np.ceil(late.max()) and check.used == short.window_s
+    assert check.warning() == (
+        f"floats.csv: line 2: field 'window_s' of {info.float_id}: given {short.window_s:.4g} s; the arrivals "
+        f"support {check.supported:.4g} s; {TOO_SHORT_NOTE}"
+    )
+    assert with_supported_window(short, 0.5, check, reread) == (short, 0.5)
+
+
+def _clutter_record(n_windows: int, clutter_rate: float, listened_s: float, rng: np.random.Generator) -> ArrivalRecord:
+    """Windows of clutter alone, uniform on [0, listened_s], none full."""
+    time = np.datetime64("2010-01-01", "ns") + np.arange(n_windows) * np.timedelta64(1, "D")
+    toas = [np.sort(rng.uniform(0.0, listened_s, rng.poisson(clutter_rate))) for _ in range(n_windows)]
+    return ArrivalRecord("f", Path("f.csv"), tuple(Window(t, a) for t, a in zip(time, toas, strict=True)))
+
+
+def test_the_window_check_on_clutter_alone_names_a_window_too_long_and_no_right_one():
+    """Clutter uniform on the 4200 s the float listened (numpy draws, not the tracker's
+    model): a right window is never contradicted over 200 records of 100 windows, one 25% too long always
+    is; with too little clutter to bound the window, undetermined."""
+    rng = np.random.default_rng(3)
+    info = dataclasses.replace(synthetic_scenario(days=10, rng=1)[1][0], window_s=4200.0, max_signals=100)
+    z = CONFIG.checks.launch_z_score
+    outcomes = {"right": set(), "long": set()}
+    for _ in range(200):
+        record = _clutter_record(100, 1.0, 4200.0, rng)
+        outcomes["right"].add(window_check(record, info, 1.0, z).outcome)
+        long = dataclasses.replace(info, window_s=5250.0)
+        outcomes["long"].add(window_check(record, long, 1.0 * 4200 / 5250, z).outcome)
+    assert CONTRADICTED not in outcomes["right"] and CONSISTENT in outcomes["right"]
+    assert outcomes["long"] == {CONTRADICTED}
+    sparse = _clutter_record(60, 0.1, 4200.0, rng)
+    assert window_check(sparse, dataclasses.replace(info, window_s=8400.0), 0.05, z).outcome == UNDETERMINED
 
 
 def test_missing_end_clock_offset_is_estimated_from_the_arrivals(simulated):

@@ -15,6 +15,7 @@ import pytest
 
 from rafostrack.model.geodesy import range_m
 from rafostrack.sim.faults import (
+    CLOCK_KINDS,
     FAULT_KINDS,
     InjectedFault,
     apply_faults,
@@ -44,6 +45,7 @@ CHANGES = {
     "clock_offset": ("floats.csv", {"clock_offset_end_s"}),
     "launch_fix": ("floats.csv", {"launch_lat", "launch_lon"}),
     "end_fix": ("floats.csv", {"end_lat", "end_lon"}),
+    "window_length": ("floats.csv", {"window_s"}),
     "source_position": ("beacons.csv", {"lat", "lon"}),
     "source_offset": ("beacons.csv", {"offset_s"}),
     "source_slot": ("beacons.csv", {"offset_s"}),
@@ -91,6 +93,8 @@ def _amount_ok(fault: InjectedFault, period: tuple[np.datetime64, np.datetime64]
         km = float(range_m(true[0], true[1], written[0], written[1])) / 1e3  # type: ignore[index]
         low, high = (20.0, 40.0) if fault.kind == "source_position" else (30.0, 60.0)
         return low * 0.995 <= km <= high * 1.005
+    if fault.kind == "window_length":
+        return 0.2 - 1e-3 <= abs(float(written) / float(true) - 1.0) <= 0.5 + 1e-3  # type: ignore[arg-type]
     if fault.kind == "source_slot":
         return abs(float(written) - float(true)) == GEOMETRIES["dimes"].slot_s  # type: ignore[arg-type]
     if fault.kind == "source_drift":
@@ -119,7 +123,7 @@ def test_each_fault_changes_only_its_field_by_the_stated_amount_and_is_recorded(
         mission.floats[0].truth["time"].iloc[-1].to_datetime64(),
     )
     assert all(_amount_ok(f, period) for f in faults), faults
-    if file == "floats.csv" and kind != "launch_fix":  # the float that never surfaced has no end values to fault
+    if kind in ("end_fix", *CLOCK_KINDS):  # the float that never surfaced has no end values to fault
         assert not any(
             f.id == info.float_id for f in faults for info in (s.info for s in mission.floats) if not info.has_end_fix
         )

@@ -14,7 +14,8 @@ tracking pass with robust settings gives positions and labels; from its confiden
   undetermined, which the tracker adds to its own. A source heard on a couple of arrivals
   that the shared sound speed hinges on is left out of it (`hinging_sources`);
 - `noise.fit_clutter_rate`: clutter signals per window;
-- `detection.fit_detection`: each beacon's peak detection probability and half range.
+- `detection.fit_detection`: each beacon's peak detection probability and half range;
+- `window_check`: the listening window's length against the latest TOAs and the clutter.
 
 The second pass tracks with these values (`Calibration.apply`). A value the user set in a
 config file or flag is kept as set, not estimated; every estimate is reported in run.json.
@@ -51,6 +52,7 @@ from .timing_problem import (
     track_at,
     without_sources,
 )
+from .window_check import window_check, with_supported_window
 
 INITIAL_CLOCK_RATE_SD_S_PER_DAY = 0.01
 MAX_RELEASES = 4  # table values released at most per calibration (`_checked_fit`)
@@ -240,6 +242,11 @@ def calibrate(
     timed = _with_values(problem.config, values).model
     detection = _fit_detection(estimate, record, problem, corrected, clocked, timed)
     associated, association_report = _fit_noise(record, timing, detection.beacons, clocked, timed)
+    if problem.config.checks.enabled:
+        window = window_check(record, problem.info, associated.clutter_rate, problem.config.checks.launch_z_score)
+        clocked, clutter_rate = with_supported_window(clocked, associated.clutter_rate, window, record)
+        associated = dataclasses.replace(associated, clutter_rate=clutter_rate)
+        checks.append(window)
     values |= _quantised(_association_values(associated))
     values = {k: v for k, v in values.items() if k not in problem.config.explicit}
     report = _report(timing, values, problem, detection, association_report)

@@ -44,6 +44,7 @@ from .kalman_evidence import solved
 from .kalman_problem import CLOCK, NODE, position_prior_sd, timing_prior_sd
 
 CONSISTENT, CONTRADICTED, UNDETERMINED, ESTIMATED = "consistent", "contradicted", "undetermined", "estimated"
+TRACKED_WITH_SUPPORTED = "tracked with the arrivals' value"  # how a contradiction's warning ends
 # Each checked field's tolerance: its `[checks]` setting (a fix or a position is a distance
 # from the table's, in km).
 TOLERANCE_SETTING = {
@@ -109,6 +110,9 @@ class MetadataCheck:
     # For a source's position: what these arrivals know of the source (`SourceInformation`),
     # for a batch to pool over the floats that hear it.
     information: SourceInformation | None = None
+    # Where the track could not use the arrivals' value: why, and what the user should do
+    # (the warning ends with it instead of "tracked with the arrivals' value").
+    note: str | None = None
 
     def as_json(self) -> dict[str, Any]:
         entry = {k: v for k, v in asdict(self).items() if v is not None or k in ("given", "supported", "sd", "line")}
@@ -139,11 +143,12 @@ class MetadataCheck:
             supported = f"{lat:.3f}, {lon:.3f} ({_number(self.supported)} km away, sd {_number(self.sd)} km)"
         else:
             given = f"{_number(self.given)} {self.unit}"
-            supported = f"{_number(self.supported)} {self.unit} (sd {_number(self.sd)} {self.unit})"
+            spread = "" if self.sd is None else f" (sd {_number(self.sd)} {self.unit})"
+            supported = f"{_number(self.supported)} {self.unit}{spread}"
         unsure = undecided_note(self.field, self.alternatives, self.other_sources)
         return (
             f"{where}: field '{self.field}' of {self.id}: given {given}; the arrivals support {supported}{unsure}; "
-            "tracked with the arrivals' value"
+            f"{self.note or TRACKED_WITH_SUPPORTED}"
         )
 
 

@@ -60,5 +60,10 @@ def fit_clutter_rate(p_clutter: NDArray, record: ArrivalRecord, info: FloatInfo)
     """Clutter signals per window (module docstring), from every stored TOA's clutter
     probability `p_clutter`."""
     expected = float(np.sum(p_clutter))
-    exposure = sum(float(horizon_s(w.toa_s, info.max_signals, info.window_s)) / info.window_s for w in record.windows)
+    exposure = clutter_exposure(record, info)
     return expected / exposure if exposure > 0 else float("nan")
+
+
+def clutter_exposure(record: ArrivalRecord, info: FloatInfo) -> float:
+    """The windows' time that could store clutter, in windows: sum_k h_k / W (module docstring)."""
+    return sum(float(horizon_s(w.toa_s, info.max_signals, info.window_s)) / info.window_s for w in record.windows)

@@ -132,7 +132,8 @@ def window_arrivals(
         Window(time=t, toa_s=g, beacon_id=lab, quality=q)
         for t, g, lab, q in zip(grouped.win_times, toa_groups, label_tuples, quality_groups, strict=True)
     )
-    return ArrivalRecord(float_id=info.float_id, path=Path(path), windows=windows)
+    late = np.sort(toa[outside & ~duplicate & (toa > info.window_s)])
+    return ArrivalRecord(info.float_id, Path(path), windows, late_toa_s=tuple(float(t) for t in late))
 
 
 def check_usable(

@@ -11,6 +11,8 @@ records in `truth/faults.json`:
   clock_offset       clock_offset_end_s off by 20-40 s (either sign)
   launch_fix         the launch fix 30-60 km off (random bearing)
   end_fix            the end fix 30-60 km off (random bearing)
+  window_length      window_s 20-50% too long or too short (to the second): a float's
+                     listening window taken from another mission's settings
   source_position    one source's position 20-40 km off (random bearing)
   source_offset      one source's offset_s off by 20-40 s (either sign)
   source_slot        one source's offset_s off by one transmission slot: the spacing of the
@@ -55,14 +57,16 @@ from ..domain import BeaconTable, FloatInfo, NaT
 from ..io.csv_table import time_text
 from ..model.geodesy import displace
 
-FLOAT_KINDS = ("end_clock_missing", "clock_sign", "clock_offset", "launch_fix", "end_fix")
+FLOAT_KINDS = ("end_clock_missing", "clock_sign", "clock_offset", "launch_fix", "end_fix", "window_length")
 SOURCE_KINDS = ("source_position", "source_offset", "source_slot", "source_drift", "source_active")
 FAULT_KINDS = FLOAT_KINDS + SOURCE_KINDS
 CLOCK_KINDS = ("end_clock_missing", "clock_sign", "clock_offset")
 FIX_KINDS = ("launch_fix", "end_fix")
+OWN_FLOAT_KINDS = (*FIX_KINDS, "window_length")  # float kinds drawn for each float independently
 
 CLOCK_OFFSET_S = (20.0, 40.0)
 FIX_KM = (30.0, 60.0)
+WINDOW_SHARE = (0.2, 0.5)
 SOURCE_POSITION_KM = (20.0, 40.0)
 SOURCE_OFFSET_S = (20.0, 40.0)
 SOURCE_DRIFT_S_PER_DAY = (0.02, 0.05)
@@ -165,6 +169,8 @@ def float_fault(kind: str, info: FloatInfo, rng: np.random.Generator) -> Injecte
         return fault("launch_fix", (info.launch_lat, info.launch_lon), launch)
     if kind == "end_fix":
         return fault("end_fix", (info.end_lat, info.end_lon), end) if info.has_end_fix else None
+    if kind == "window_length":
+        return fault("window_s", info.window_s, float(round(info.window_s * (1.0 + _signed(WINDOW_SHARE, rng)))))
     if not has_clock:
         return None
     if kind == "end_clock_missing":
@@ -226,7 +232,7 @@ def draw_faults(
     faults: list[InjectedFault] = []
     for kind in (k for k in kinds if k in FLOAT_KINDS):
         for k, info in enumerate(floats):
-            chosen = rng.random() < float_share and kind in (clock_kind[k], *FIX_KINDS)
+            chosen = rng.random() < float_share and kind in (clock_kind[k], *OWN_FLOAT_KINDS)
             fault = float_fault(kind, info, rng)
             if chosen and fault is not None:
                 faults.append(fault)
@@ -250,6 +256,8 @@ def _set_float(info: FloatInfo, field: str, value: Value) -> FloatInfo:
         return dataclasses.replace(info, launch_lat=float(value[0]), launch_lon=float(value[1]))
     if field == "end_fix" and isinstance(value, tuple):
         return dataclasses.replace(info, end_lat=float(value[0]), end_lon=float(value[1]))
+    if field == "window_s" and isinstance(value, float | int):
+        return dataclasses.replace(info, window_s=float(value))
     raise ValueError(f"{FLOATS_CSV}: cannot set field {field!r} to {value!r}")
 
 
