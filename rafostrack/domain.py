@@ -129,15 +129,26 @@ class Window:
 
 
 @dataclass(frozen=True)
+class LateArrival:
+    """A TOA later than the float's window_s, which the reader left out of its window (the
+    index of the window in the record), with its label and correlation height, if any."""
+
+    window: int
+    toa_s: float
+    beacon_id: str | None = None
+    quality: float = float("nan")
+
+
+@dataclass(frozen=True)
 class ArrivalRecord:
     """A float's listening windows in time order."""
 
     float_id: str
     path: Path
     windows: tuple[Window, ...]
-    # The TOAs the reader dropped as later than the float's window_s: evidence that the
-    # float listened longer than its table says (`calibrate.window_check`).
-    late_toa_s: tuple[float, ...] = ()
+    # The TOAs the reader dropped as later than the float's window_s, by window and TOA:
+    # evidence that the float listened longer than its table says (`calibrate.window_check`).
+    late: tuple[LateArrival, ...] = ()
 
     @property
     def has_labels(self) -> bool:

@@ -28,11 +28,16 @@ from rafostrack.calibrate.metadata_checks import (
     with_position_alternative,
 )
 from rafostrack.calibrate.source_scan import schedule_candidates
-from rafostrack.calibrate.window_check import MIN_LATE_TOAS, TOO_SHORT_NOTE, window_check, with_supported_window
+from rafostrack.calibrate.window_check import (
+    MIN_LATE_TOAS,
+    TOOK_BACK,
+    late_window_check,
+    window_check,
+)
 from rafostrack.config import load_config, with_overrides
-from rafostrack.domain import ArrivalRecord, Window
+from rafostrack.domain import ArrivalRecord, FloatInfo, LateArrival, Window
 from rafostrack.errors import Warnings
-from rafostrack.io.records import csv_names, window_arrivals
+from rafostrack.io.records import csv_names, window_arrivals, with_longer_window
 from rafostrack.model.geodesy import displace
 from rafostrack.problem import FloatProblem
 from rafostrack.run.method import track_record
@@ -225,24 +230,56 @@ def test_a_window_too_long_is_named_and_the_track_uses_the_arrivals_one(cluttere
     )
 
 
-def test_a_window_too_short_is_named_with_what_to_do(simulated):
-    """window_s 30% shorter than the float listened: the reader drops the later TOAs, the
-    check names the window and the latest of them; the track keeps the given window."""
+def _reread(simulated, window_s: float) -> tuple[ArrivalRecord, FloatInfo]:
+    """The simulated float's record as the reader windows it when floats.csv says `window_s`."""
     _, record, beacons, info = simulated
-    short = dataclasses.replace(info, window_s=0.7 * info.window_s)
+    info = dataclasses.replace(info, window_s=window_s)
     times = np.repeat([w.time for w in record.windows], [max(w.n_signals, 1) for w in record.windows])
     toa = np.concatenate([w.toa_s if w.n_signals else [np.nan] for w in record.windows])
-    warnings = Warnings()
-    reread = window_arrivals(Path("sim1.csv"), short, beacons, times, toa, warnings, csv_names(np.arange(len(toa)) + 2))
+    names = csv_names(np.arange(len(toa)) + 2)
+    return window_arrivals(Path("sim1.csv"), info, beacons, times, toa, Warnings(), names), info
+
+
+def test_a_window_too_short_is_named_and_its_late_toas_taken_back(simulated):
+    """window_s 30% shorter than the float listened: the reader leaves the later TOAs out,
+    the check names the window and the latest of them, and the record re-windowed with it
+    is the record read with the right window."""
+    record = simulated[1]
+    short_record, short = _reread(simulated, 0.7 * simulated[3].window_s)
+    toa = np.concatenate([w.toa_s for w in record.windows])
     late = toa[toa > short.window_s]
-    assert reread.late_toa_s == tuple(np.sort(late)) and len(late) >= MIN_LATE_TOAS
-    check = window_check(reread, short, 0.5, CONFIG.checks.launch_z_score)
-    assert check.outcome == CONTRADICTED and check.supported == np.ceil(late.max()) and check.used == short.window_s
+    assert sorted(a.toa_s for a in short_record.late) == sorted(late) and len(late) >= MIN_LATE_TOAS
+    check = late_window_check(short_record, short)
+    assert check is not None and check.outcome == CONTRADICTED and check.supported == check.used == np.ceil(late.max())
     assert check.warning() == (
-        f"floats.csv: line 2: field 'window_s' of {info.float_id}: given {short.window_s:.4g} s; the arrivals "
-        f"support {check.supported:.4g} s; {TOO_SHORT_NOTE}"
+        f"floats.csv: line 2: field 'window_s' of {short.float_id}: given {short.window_s:.4g} s; the arrivals "
+        f"support {check.supported:.4g} s; {TOOK_BACK}"
     )
-    assert with_supported_window(short, 0.5, check, reread) == (short, 0.5)
+    taken_back = with_longer_window(short_record, check.used, short.max_signals)
+    assert taken_back.late == ()
+    for a, b in zip(taken_back.windows, record.windows, strict=True):
+        assert a.time == b.time and np.array_equal(a.toa_s, b.toa_s)
+
+
+def test_two_toas_past_the_window_do_not_contradict_it(simulated):
+    record, info = _reread(simulated, simulated[3].window_s)
+    late = (LateArrival(0, info.window_s + 5.0), LateArrival(3, info.window_s + 9.0))
+    assert late_window_check(dataclasses.replace(record, late=late), info) is None
+    assert late_window_check(dataclasses.replace(record, late=(*late, LateArrival(4, 9e4))), info) is not None
+
+
+def test_the_method_tracks_a_window_too_short_with_the_late_toas(simulated):
+    """Through `track_record`: the window's check made before tracking stands in run.json
+    (not calibration's, which saw the supported window), the track uses the supported
+    window and labels the TOAs past the given one."""
+    short_record, short = _reread(simulated, 0.7 * simulated[3].window_s)
+    fast = with_overrides(CONFIG, filter={"particles": 200}, calibrate={"iterations": 1})
+    out = track_record(FloatProblem(simulated[2], short, fast), short_record)
+    (entry,) = [c for c in out.metadata_checks if c["field"] == "window_s"]
+    assert entry["given"] == short.window_s and entry["outcome"] == CONTRADICTED
+    assert out.problem.info.window_s == entry["used"] > short.window_s
+    assert (out.estimate.labels["toa_s"] > short.window_s).sum() == len(short_record.late)
+    assert sum(w.startswith("floats.csv: line 2: field 'window_s'") for w in out.warnings) == 1
 
 
 def _clutter_record(n_windows: int, clutter_rate: float, listened_s: float, rng: np.random.Generator) -> ArrivalRecord:

@@ -1,15 +1,15 @@
 """The float's listening window (floats.csv window_s) against its arrivals.
 
-Too short: the reader drops the TOAs later than window_s (`ArrivalRecord.late_toa_s`). At
-least `MIN_LATE_TOAS` of them say the float listened longer (one or two are more likely
-corrupt entries than a wrong window): contradicted, the arrivals support the latest of
-them. The track keeps the given window (the TOAs past it are no longer in the record), and
-the warning asks for the window the float listened.
+Too short (`late_window_check`, before tracking): the reader leaves out the TOAs later than
+window_s (`ArrivalRecord.late`). At least `MIN_LATE_TOAS` of them say the float listened
+longer (one or two are more likely corrupt entries than a wrong window): contradicted, the
+arrivals support the latest of them, and the record is tracked with that window, its late
+TOAs taken back (`io.records.with_longer_window`).
 
-Too long: a window that stored fewer than max_signals TOAs was listened to its end, and
-the model spreads clutter uniformly over it. At the calibrated rate lambda per window, the
-clutter of the n such windows falls past the record's latest TOA T as a Poisson count of
-mean
+Too long (`window_check`, in calibration): a window that stored fewer than max_signals TOAs
+was listened to its end, and the model spreads clutter uniformly over it. At the calibrated
+rate lambda per window, the clutter of the n such windows falls past the record's latest
+TOA T as a Poisson count of mean
 
     mu = n lambda (W - T) / W,
 
@@ -25,8 +25,9 @@ the window is
   (n lambda <= c: even a whole window's length past T would be expected to catch fewer
   clutter signals than the test needs).
 
-The windows are short against the float's drift, so a window somewhat too long or too
-short changes a track little (docs/decisions.md); the check is there for gross errors.
+A float that fills its max_signals in almost every window rarely listens to the end, so
+there a window too long is mostly undetermined; it then also changes the track little
+(docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -43,22 +44,30 @@ from .noise import clutter_exposure
 MIN_LATE_TOAS = 3
 CONSISTENT_MU = -math.log(0.05)
 FIELD = "window_s"
-TOO_SHORT_NOTE = "its TOAs past the window were dropped when read: give the window the float listened and track again"
+TOOK_BACK = "tracked with the arrivals' value, the TOAs past the given window taken back"
+
+
+def late_window_check(record: ArrivalRecord, info: FloatInfo) -> MetadataCheck | None:
+    """A window too short, where at least `MIN_LATE_TOAS` TOAs lie past it (module
+    docstring); None otherwise."""
+    if len(record.late) < MIN_LATE_TOAS:
+        return None
+    file, line = float_source(info)
+    latest = float(math.ceil(max(a.toa_s for a in record.late)))
+    return MetadataCheck(file, line, info.float_id, FIELD, float(info.window_s), latest, None, "s", CONTRADICTED,
+                         used=latest, note=TOOK_BACK)  # fmt: skip
 
 
 def window_check(record: ArrivalRecord, info: FloatInfo, clutter_rate: float, z: float) -> MetadataCheck:
-    """`info.window_s` against the arrivals of `record`, at `clutter_rate` signals per
-    window (module docstring)."""
+    """`info.window_s` against the clutter past the latest TOA of `record`, at
+    `clutter_rate` signals per window: a window too long (module docstring)."""
     file, line = float_source(info)
     given = float(info.window_s)
 
-    def check(supported: float | None, outcome: str, note: str | None = None) -> MetadataCheck:
-        used = supported if outcome == CONTRADICTED and note is None else given
-        return MetadataCheck(file, line, info.float_id, FIELD, given, supported, None, "s", outcome, used=used,
-                             note=note)  # fmt: skip
+    def check(supported: float | None, outcome: str) -> MetadataCheck:
+        used = supported if outcome == CONTRADICTED else given
+        return MetadataCheck(file, line, info.float_id, FIELD, given, supported, None, "s", outcome, used=used)
 
-    if len(record.late_toa_s) >= MIN_LATE_TOAS:
-        return check(float(math.ceil(max(record.late_toa_s))), CONTRADICTED, TOO_SHORT_NOTE)
     latest = max((float(w.toa_s[-1]) for w in record.windows if w.n_signals), default=0.0)
     listened = sum(1 for w in record.windows if w.n_signals < info.max_signals)
     reach = listened * clutter_rate  # the clutter these windows catch over a whole window

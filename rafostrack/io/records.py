@@ -19,6 +19,7 @@ checks the arrays (some window, no missing time, none before the launch) then wi
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +28,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from ..domain import ArrivalRecord, BeaconTable, FloatInfo, Window
+from ..domain import ArrivalRecord, BeaconTable, FloatInfo, LateArrival, Window
 from ..errors import InputError, Warnings
 from .csv_table import time_text
 
@@ -132,8 +133,42 @@ def window_arrivals(
         Window(time=t, toa_s=g, beacon_id=lab, quality=q)
         for t, g, lab, q in zip(grouped.win_times, toa_groups, label_tuples, quality_groups, strict=True)
     )
-    late = np.sort(toa[outside & ~duplicate & (toa > info.window_s)])
-    return ArrivalRecord(info.float_id, Path(path), windows, late_toa_s=tuple(float(t) for t in late))
+    return ArrivalRecord(info.float_id, Path(path), windows, late=_late(grouped, toa, info, labels, quality))
+
+
+def _late(
+    grouped: _Grouped, toa: NDArray, info: FloatInfo, labels: NDArray[np.object_] | None, quality: NDArray | None
+) -> tuple[LateArrival, ...]:
+    """The TOAs later than the window, by window and TOA (`ArrivalRecord.late`)."""
+    entries = grouped.order
+    late = np.flatnonzero(grouped.has_toa & (toa[entries] > info.window_s))
+    return tuple(
+        LateArrival(
+            int(grouped.win_of_entry[j]),
+            float(toa[entries[j]]),
+            (labels[entries[j]] or None) if labels is not None else None,
+            float(quality[entries[j]]) if quality is not None else float("nan"),
+        )
+        for j in late
+    )
+
+
+def with_longer_window(record: ArrivalRecord, window_s: float, max_signals: int) -> ArrivalRecord:
+    """`record` as read with a window of `window_s` s, longer than the one it was read with:
+    each window's late TOAs up to `window_s` (`ArrivalRecord.late`, all later than the
+    window's own) stored after its TOAs while it holds fewer than `max_signals`."""
+    windows = list(record.windows)
+    for k in sorted({a.window for a in record.late}):
+        window = windows[k]
+        extra = [a for a in record.late if a.window == k and a.toa_s <= window_s][: max_signals - window.n_signals]
+        if not extra:
+            continue
+        labels = None if window.beacon_id is None else (*window.beacon_id, *(a.beacon_id for a in extra))
+        quality = None if window.quality is None else np.concatenate([window.quality, [a.quality for a in extra]])
+        toa = np.concatenate([window.toa_s, [a.toa_s for a in extra]])
+        windows[k] = Window(window.time, toa, beacon_id=labels, quality=quality)
+    late = tuple(a for a in record.late if a.toa_s > window_s)
+    return dataclasses.replace(record, windows=tuple(windows), late=late)
 
 
 def check_usable(

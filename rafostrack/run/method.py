@@ -17,6 +17,11 @@
        The position variance that the calibration leaves undetermined (`Calibration.
        nuisance_cov_km2`) is added to the last pass's covariance.
 
+Before step 1, with `[checks] enabled`: a listening window too short for the TOAs the
+reader left out past it is lengthened and those TOAs taken back (`calibrate.window_check`),
+and a launch fix far from anything the float could hear is weighed against the first days'
+arrivals (`calibrate.launch_check`).
+
 With `[calibrate] enabled = false`, one pass with the configured values. Values the user set
 explicitly (config files, flags: `Config.explicit`) are kept as set.
 """
@@ -33,8 +38,10 @@ from ..calibrate import Calibration, calibrate
 from ..calibrate.launch_check import launch_check
 from ..calibrate.metadata_checks import CONTRADICTED, MetadataCheck, warnings_of
 from ..calibrate.source_scan import schedule_candidates, with_supported_schedule
+from ..calibrate.window_check import late_window_check
 from ..config import Config, with_overrides
 from ..domain import ArrivalRecord
+from ..io.records import with_longer_window
 from ..motion import ClockWalk
 from ..problem import FloatProblem
 from .one_pass import Tracker, TrackOutput
@@ -84,21 +91,37 @@ def track_record(
     passes = 1 + config.calibrate.iterations if config.calibrate.enabled else 1
     told = _pass_progress(progress, passes)
     if config.calibrate.enabled:
+        late = late_window_check(record, problem.info) if config.checks.enabled else None
+        if late is not None:
+            problem, record = _with_window_of(late, problem, record)
         checked = launch_check(problem, record) if config.checks.enabled else None
         tracked = problem if checked is None else checked[1]
         out, final = _calibrated_method(tracked, record, passes, told, also_filtered)
         if checked is not None and checked[0].outcome == CONTRADICTED:
-            out = _with_launch_check(out, checked[0])
+            out = _with_early_check(out, checked[0])
+        if late is not None:
+            out = _with_early_check(out, late)
     else:
         out = Tracker.from_problem(problem).track(record, also_filtered=also_filtered, progress=told(1))
         final = problem
     return dataclasses.replace(out, problem=final)
 
 
-def _with_launch_check(out: TrackOutput, check: MetadataCheck) -> TrackOutput:
-    """`out` with the gross launch check (`calibrate.launch_check`) in place of the finer one,
-    which weighed the moved launch, not the table's."""
-    checks = [c for c in out.metadata_checks if c["field"] != "launch_fix"]
+def _with_window_of(
+    check: MetadataCheck, problem: FloatProblem, record: ArrivalRecord
+) -> tuple[FloatProblem, ArrivalRecord]:
+    """The problem and record with the window `check` supports, its late TOAs taken back."""
+    assert isinstance(check.used, float)
+    info = dataclasses.replace(problem.info, window_s=check.used)
+    return dataclasses.replace(problem, info=info), with_longer_window(record, check.used, info.max_signals)
+
+
+def _with_early_check(out: TrackOutput, check: MetadataCheck) -> TrackOutput:
+    """`out` with a check made before tracking (the gross launch check,
+    `calibrate.launch_check`; a window too short, `calibrate.window_check`) in place of
+    calibration's of the same field, which weighed the value the track started from, not
+    the table's."""
+    checks = [c for c in out.metadata_checks if c["field"] != check.field]
     warning = check.warning()
     return dataclasses.replace(
         out,
