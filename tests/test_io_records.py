@@ -1,15 +1,17 @@
 """io/records.py's refusal of records that cannot give a track (`check_usable`): no usable
 TOA at all, or TOAs in too few windows, is a one-line input error naming the likely cause,
-never a track from the drift model alone."""
+never a track from the drift model alone; and the TOAs it leaves out past the window, kept
+aside for a longer one."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
-from support import daily_rows, error_of, read_small
+from support import FLOATS, daily_rows, error_of, read_small
 
-from rafostrack.io.records import MIN_HEARD_SHARE, MIN_WINDOWS_FOR_SHARE
+from rafostrack.io.records import MIN_HEARD_SHARE, MIN_WINDOWS_FOR_SHARE, with_longer_window
 
 
 def _in_milliseconds(rows: str) -> str:
@@ -53,3 +55,29 @@ def test_a_short_record_with_one_heard_window_is_kept(tmp_path: Path, n_windows:
     text = "\n".join([rows[0], rows[1], *(line.replace(",100", ",") for line in rows[2:-1])]) + "\n"
     record, _ = read_small(tmp_path, text)
     assert len(record.windows) == n_windows
+
+
+def test_toas_past_the_window_are_kept_aside_and_taken_back_with_their_labels(tmp_path: Path) -> None:
+    """TOAs later than window_s (4000 s) stay out of their windows but on the record
+    (`ArrivalRecord.late`, with their labels); a longer window takes back those it covers,
+    while their window holds fewer than max_signals (3) TOAs, as reading with it would."""
+    rows = (
+        "time,toa_s,beacon_id\n"
+        "2009-01-02T00:00:00Z,100,A\n2009-01-02T00:00:00Z,4600,\n2009-01-02T00:00:00Z,4500,B\n"
+        "2009-01-03T00:00:00Z,100,A\n2009-01-03T00:00:00Z,200,B\n2009-01-03T00:00:00Z,300,\n"
+        "2009-01-03T00:00:00Z,4100,A\n"
+    )
+    record, _ = read_small(tmp_path, rows)
+    assert [(a.window, a.toa_s, a.beacon_id) for a in record.late] == [
+        (0, 4500.0, "B"),
+        (0, 4600.0, None),
+        (1, 4100.0, "A"),
+    ]
+    assert list(record.windows[0].toa_s) == [100.0]
+    longer = with_longer_window(record, 4550.0, 3)
+    assert list(longer.windows[0].toa_s) == [100.0, 4500.0] and longer.windows[0].beacon_id == ("A", "B")
+    assert list(longer.windows[1].toa_s) == [100.0, 200.0, 300.0]  # full: 4100 stays out
+    assert [a.toa_s for a in longer.late] == [4600.0]
+    reread, _ = read_small(tmp_path, rows, floats=FLOATS.replace(",4000,", ",4550,"))
+    for a, b in zip(longer.windows, reread.windows, strict=True):
+        assert np.array_equal(a.toa_s, b.toa_s) and a.beacon_id == b.beacon_id

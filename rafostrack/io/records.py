@@ -157,10 +157,14 @@ def with_longer_window(record: ArrivalRecord, window_s: float, max_signals: int)
     """`record` as read with a window of `window_s` s, longer than the one it was read with:
     each window's late TOAs up to `window_s` (`ArrivalRecord.late`, all later than the
     window's own) stored after its TOAs while it holds fewer than `max_signals`."""
+    taken: dict[int, list[LateArrival]] = {}
+    for arrival in record.late:
+        if arrival.toa_s <= window_s:
+            taken.setdefault(arrival.window, []).append(arrival)
     windows = list(record.windows)
-    for k in sorted({a.window for a in record.late}):
+    for k, arrivals in taken.items():
         window = windows[k]
-        extra = [a for a in record.late if a.window == k and a.toa_s <= window_s][: max_signals - window.n_signals]
+        extra = arrivals[: max_signals - window.n_signals]
         if not extra:
             continue
         labels = None if window.beacon_id is None else (*window.beacon_id, *(a.beacon_id for a in extra))
