@@ -291,8 +291,8 @@ def _clutter_record(n_windows: int, clutter_rate: float, listened_s: float, rng:
 
 def test_the_window_check_on_clutter_alone_names_a_window_too_long_and_no_right_one():
     """Clutter uniform on the 4200 s the float listened (numpy draws, not the tracker's
-    model): a right window is never contradicted over 200 records of 100 windows, one 25% too long always
-    is; with too little clutter to bound the window, undetermined."""
+    model), 200 records of 100 windows: a right window is never contradicted, one 25% too
+    long always is; with too little clutter to bound the window, undetermined."""
     rng = np.random.default_rng(3)
     info = dataclasses.replace(synthetic_scenario(days=10, rng=1)[1][0], window_s=4200.0, max_signals=100)
     z = CONFIG.checks.launch_z_score
