@@ -26,7 +26,11 @@ each seed, beside the reference's own.
 
     python benchmarks/robustness.py [--floats 24] [--days 240] [--seed 2026 ...] [--workers 2]
                                     [--out DIR] [--config FILE] [--only ID ...] [--csv FILE]
-                                    [--filter-seeds 0 1 ...] [--report docs/validation.md]
+                                    [--filter-seeds 0 1 ...] [--knob NAME=VALUE ...]
+                                    [--report docs/validation.md]
+
+`--knob NAME=VALUE` sets a number knob of the stress generator (`StressConfig`) for every
+mission, e.g. `--knob clutter_taper=0.8` to break an assumption of the tracker's model.
 
 A single run's per-float figures move with the filter's random path (docs/decisions.md):
 `--filter-seeds` tracks every float once per `[filter] seed` given, prints the table per
@@ -396,6 +400,13 @@ def _parse_args() -> argparse.Namespace:
         help=f"metadata fault sets: each (one per kind), all (every kind together), KIND[,KIND...]; {FAULT_KINDS}",
     )
     parser.add_argument(
+        "--knob",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a stress generator knob (a number field of rafostrack.sim.stress.StressConfig), e.g. clutter_taper=0.8",
+    )
+    parser.add_argument(
         "--never-surfaced",
         type=float,
         help=f"share of floats with no end fix and no end clock (default {NEVER_SURFACED_SHARE} with --faults, else 0)",
@@ -405,9 +416,19 @@ def _parse_args() -> argparse.Namespace:
         parser.error("--faults tracks with the configured [filter] seed; drop --filter-seeds")
     try:
         args.fault_sets = fault_sets(args.faults) if args.faults else []
+        args.knobs = dict(_knob(text) for text in args.knob)
     except ValueError as error:
         parser.error(str(error))
     return args
+
+
+def _knob(text: str) -> tuple[str, float | int]:
+    """`NAME=VALUE` as a stress knob (a number field of `StressConfig`)."""
+    name, _, value = text.partition("=")
+    numbers = {f.name: f.type for f in dataclasses.fields(StressConfig) if f.type in ("int", "float")}
+    if name not in numbers:
+        raise ValueError(f"--knob {text}: not a number knob of StressConfig; known: {', '.join(sorted(numbers))}")
+    return name, int(value) if numbers[name] == "int" else float(value)
 
 
 def _output_root(args: argparse.Namespace) -> Path:
@@ -504,7 +525,7 @@ def run_stress(args: argparse.Namespace, scenario_seed: int, root: Path) -> Seed
     """The stress benchmark on the missions of `scenario_seed`: every float by default and
     with its true labels, per filter seed."""
     root.mkdir(parents=True, exist_ok=True)
-    knobs = {"never_surfaced_share": args.never_surfaced} if args.never_surfaced else None
+    knobs = {**args.knobs, **({"never_surfaced_share": args.never_surfaced} if args.never_surfaced else {})}
     files = _only(make_missions(root / "missions", args.floats, args.days, scenario_seed, knobs), args.only)
     seeds: list[int | None] = list(args.filter_seeds) if args.filter_seeds else [None]
     tasks = [(f, root / "out", tuple(args.config), seed) for seed in seeds for f in files]
@@ -791,7 +812,7 @@ def run_faults(args: argparse.Namespace, scenario_seed: int, root: Path) -> Seed
     tables (`score`: the stress benchmark's table and targets), then with each fault set's
     tables (`score_faulted`); per set the table and the targets."""
     share = NEVER_SURFACED_SHARE if args.never_surfaced is None else args.never_surfaced
-    knobs = {"clock_end_offset_s": CLOCK_END_OFFSET_S, "never_surfaced_share": share}
+    knobs = {**args.knobs, "clock_end_offset_s": CLOCK_END_OFFSET_S, "never_surfaced_share": share}
     missions = simulate_missions(args.floats, args.days, scenario_seed, knobs)
     correct = _only(write_missions(root / "missions" / "correct", missions), args.only)
     (root / "out" / "correct").mkdir(parents=True, exist_ok=True)

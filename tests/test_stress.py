@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rafostrack.sim.stress import DAY_NS, StressConfig, simulate_stress, with_knobs
+from rafostrack.sim.stress import DAY_NS, StressConfig, _clutter_toas, simulate_stress, with_knobs
 
 QUIET = StressConfig(
     days=60, gaps=False, fading=False, bad_propagation=False, multipath=False, outage=False, burst_prob=0.0
@@ -67,3 +67,16 @@ def test_too_short_a_mission_for_its_gaps_is_a_clear_error():
     StressConfig(days=20, gaps=False)
     with pytest.raises(ValueError, match="unknown stress knob"):
         with_knobs(QUIET, {"gap": True})
+
+
+def test_tapered_clutter_has_the_stated_density():
+    """`clutter_taper` a: density proportional to 1 - a x on the window (x in [0, 1]); mean
+    x (1/2 - a/3) / (1 - a/2), share past 0.9 (0.1 - a 0.095) / (1 - a/2). a = 0 draws what
+    the uniform clutter always drew."""
+    for a in (0.5, 1.0):
+        x = _clutter_toas(200_000, 4200.0, a, np.random.default_rng(1)) / 4200.0
+        assert 0.0 <= x.min() and x.max() <= 1.0
+        assert x.mean() == pytest.approx((0.5 - a / 3) / (1 - a / 2), abs=3e-3)
+        assert (x > 0.9).mean() == pytest.approx((0.1 - a * 0.095) / (1 - a / 2), abs=2e-3)
+    uniform = np.random.default_rng(2).uniform(0.0, 4200.0, 50)
+    assert np.array_equal(_clutter_toas(50, 4200.0, 0.0, np.random.default_rng(2)), uniform)

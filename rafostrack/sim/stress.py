@@ -125,6 +125,10 @@ class StressConfig:
     toa_sd_s: tuple[float, float] = (1.5, 3.0)
     heavy_tails: bool = True
     burst_prob: float = 0.03
+    # Clutter's density over the window falls linearly to (1 - clutter_taper) of its start
+    # at the window's end (0: uniform, as the tracker's model has it and the window check
+    # assumes, `rafostrack.calibrate.window_check`; 1: none at the very end).
+    clutter_taper: float = 0.0
     # Coverage: a float whose drift leaves the array (fewer than 3 sources within their
     # half-detection range on more than 1 - this fraction of days) is drawn again. Where no
     # source can be heard the data cannot hold a track, whatever the tracker; 0 keeps every
@@ -383,9 +387,18 @@ def _window(
             times_.append(toa[i] + delay[i])
             labels.append(ids[i])
     n_clutter = rng.poisson(cfg.clutter_rate) + (int(rng.integers(3, 7)) if rng.random() < cfg.burst_prob else 0)
-    times_ += list(rng.uniform(0.0, geometry.window_s, n_clutter))
+    times_ += list(_clutter_toas(n_clutter, geometry.window_s, cfg.clutter_taper, rng))
     labels += [None] * n_clutter
     return _stored(t, np.array(times_, dtype=float), np.array(labels, dtype=object), geometry, cfg, rng)
+
+
+def _clutter_toas(n: int, window_s: float, taper: float, rng: np.random.Generator) -> NDArray[np.float64]:
+    """n clutter TOAs on [0, window_s] of density proportional to 1 - taper x / window_s: by
+    inversion of its CDF, F(x) = (x - a x^2 / 2) / (1 - a / 2) on x in [0, 1] (a = taper)."""
+    if taper == 0.0:
+        return rng.uniform(0.0, window_s, n)
+    c = rng.uniform(0.0, 1.0, n) * (1.0 - taper / 2.0)
+    return window_s * (1.0 - np.sqrt(1.0 - 2.0 * taper * c)) / taper
 
 
 def _stored(
