@@ -261,11 +261,17 @@ def test_a_window_too_short_is_named_and_its_late_toas_taken_back(simulated):
         assert a.time == b.time and np.array_equal(a.toa_s, b.toa_s)
 
 
-def test_two_toas_past_the_window_do_not_contradict_it(simulated):
+def test_two_toas_or_a_fill_value_past_the_window_do_not_contradict_it(simulated):
+    """Two late TOAs contradict nothing, nor does a value recurring in three windows (a fill
+    value); a third late TOA does, and the window it supports leaves the fill value out."""
     record, info = _reread(simulated, simulated[3].window_s)
     late = (LateArrival(0, info.window_s + 5.0), LateArrival(3, info.window_s + 9.0))
+    fill = tuple(LateArrival(k, 9999.0) for k in (5, 6, 7))
     assert late_window_check(dataclasses.replace(record, late=late), info) is None
-    assert late_window_check(dataclasses.replace(record, late=(*late, LateArrival(4, 9e4))), info) is not None
+    assert late_window_check(dataclasses.replace(record, late=(*late, *fill)), info) is None
+    third = LateArrival(4, info.window_s + 20.0)
+    check = late_window_check(dataclasses.replace(record, late=(*late, *fill, third)), info)
+    assert check is not None and check.used == np.ceil(info.window_s + 20)
 
 
 def test_the_method_tracks_a_window_too_short_with_the_late_toas(simulated):

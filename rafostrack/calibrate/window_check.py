@@ -2,9 +2,10 @@
 
 Too short (`late_window_check`, before tracking): the reader leaves out the TOAs later than
 window_s (`ArrivalRecord.late`). At least `MIN_LATE_TOAS` of them say the float listened
-longer (one or two are more likely corrupt entries than a wrong window): contradicted, the
-arrivals support the latest of them, and the record is tracked with that window, its late
-TOAs taken back (`io.records.with_longer_window`).
+longer (one or two are more likely corrupt entries than a wrong window, and a value that
+recurs in `FILL_REPEATS` or more windows is a fill value such as 9999, not an arrival):
+contradicted, the arrivals support the latest of them, and the record is tracked with that
+window, its late TOAs up to it taken back (`io.records.with_longer_window`).
 
 Too long (`window_check`, in calibration): a window that stored fewer than max_signals TOAs
 was listened to its end, and the model spreads clutter uniformly over it. At the calibrated
@@ -34,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import Counter
 
 from scipy.special import log_ndtr
 
@@ -42,18 +44,21 @@ from .metadata_checks import CONSISTENT, CONTRADICTED, UNDETERMINED, MetadataChe
 from .noise import clutter_exposure
 
 MIN_LATE_TOAS = 3
+FILL_REPEATS = 3
 CONSISTENT_MU = -math.log(0.05)
 FIELD = "window_s"
 TOOK_BACK = "tracked with the arrivals' value, the TOAs past the given window taken back"
 
 
 def late_window_check(record: ArrivalRecord, info: FloatInfo) -> MetadataCheck | None:
-    """A window too short, where at least `MIN_LATE_TOAS` TOAs lie past it (module
-    docstring); None otherwise."""
-    if len(record.late) < MIN_LATE_TOAS:
+    """A window too short, where at least `MIN_LATE_TOAS` TOAs lie past it, fill values
+    aside (module docstring); None otherwise."""
+    repeats = Counter(a.toa_s for a in record.late)
+    late = [a.toa_s for a in record.late if repeats[a.toa_s] < FILL_REPEATS]
+    if len(late) < MIN_LATE_TOAS:
         return None
     file, line = float_source(info)
-    latest = float(math.ceil(max(a.toa_s for a in record.late)))
+    latest = float(math.ceil(max(late)))
     return MetadataCheck(file, line, info.float_id, FIELD, float(info.window_s), latest, None, "s", CONTRADICTED,
                          used=latest, note=TOOK_BACK)  # fmt: skip
 
