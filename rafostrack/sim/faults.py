@@ -61,8 +61,6 @@ FLOAT_KINDS = ("end_clock_missing", "clock_sign", "clock_offset", "launch_fix", 
 SOURCE_KINDS = ("source_position", "source_offset", "source_slot", "source_drift", "source_active")
 FAULT_KINDS = FLOAT_KINDS + SOURCE_KINDS
 CLOCK_KINDS = ("end_clock_missing", "clock_sign", "clock_offset")
-FIX_KINDS = ("launch_fix", "end_fix")
-OWN_FLOAT_KINDS = (*FIX_KINDS, "window_length")  # float kinds drawn for each float independently
 
 CLOCK_OFFSET_S = (20.0, 40.0)
 FIX_KM = (30.0, 60.0)
@@ -232,7 +230,7 @@ def draw_faults(
     faults: list[InjectedFault] = []
     for kind in (k for k in kinds if k in FLOAT_KINDS):
         for k, info in enumerate(floats):
-            chosen = rng.random() < float_share and kind in (clock_kind[k], *OWN_FLOAT_KINDS)
+            chosen = rng.random() < float_share and (kind == clock_kind[k] or kind not in CLOCK_KINDS)
             fault = float_fault(kind, info, rng)
             if chosen and fault is not None:
                 faults.append(fault)
