@@ -19,6 +19,7 @@ from rafostrack.calibrate.metadata_checks import (
     CONSISTENT,
     CONTRADICTED,
     ESTIMATED,
+    MIN_SOURCE_ARRIVALS,
     UNDETERMINED,
     MetadataCheck,
     data_only,
@@ -389,6 +390,29 @@ def test_a_wrong_source_timing_is_named_on_that_source_only(simulated, field, wr
     assert abs(check.supported - float(getattr(beacons, field)[2])) < 3 * check.sd  # the true value
     (warning,) = warnings_of(calibration.checks)
     assert warning.startswith(f"beacons.csv: line 4: field '{field}' of B3: given {given:.4g}")
+
+
+def test_a_source_on_a_few_arrivals_is_not_judged(simulated):
+    """B3's offset written 25 s off: named on its whole record (the test above), but with
+    only `MIN_SOURCE_ARRIVALS` - 1 of its arrivals labelled (the rest taken as clutter) its
+    checks are undetermined, without a value, and nothing is named; at `MIN_SOURCE_ARRIVALS`
+    arrivals the offset is named again."""
+    estimate, record, beacons, info = simulated
+    labels = estimate.labels
+    b3 = np.flatnonzero((labels["beacon_id"] == "B3").to_numpy())
+    given = float(beacons.offset_s[2]) + 25.0
+    for kept, judged in ((MIN_SOURCE_ARRIVALS - 1, False), (MIN_SOURCE_ARRIVALS, True)):
+        few = labels.copy()
+        few.loc[few.index[b3[kept:]], ["beacon_id", "prob"]] = [None, 0.0]
+        thinned = dataclasses.replace(estimate, labels=few)
+        _, checks = _checked((thinned, record, beacons, info), beacon_changes={"offset_s": (2, given)})
+        b3_checks = [checks[("B3", f)] for f in ("offset_s", "drift_s_per_day", "position")]
+        if judged:
+            assert b3_checks[0].outcome == CONTRADICTED and all(c.supported is not None for c in b3_checks)
+            continue
+        unjudged = (UNDETERMINED, None, None, None)
+        assert [(c.outcome, c.supported, c.sd, c.information) for c in b3_checks] == [unjudged] * 3
+        assert CONTRADICTED not in {c.outcome for c in checks.values()}
 
 
 def test_the_clock_prior_width_is_honoured(simulated):

@@ -18,12 +18,13 @@ z sqrt(C_d) (the arrivals are sure the value is not the table's), and than the v
 tolerance (the difference matters; the prior's own width, which lets calibration refine a
 value, is not an error); *consistent* when the arrivals place it within the tolerance,
 |correction| <= tolerance + 2 sd with sd <= tolerance (their 95% interval reaches the
-tolerance band); *undetermined* otherwise: the arrivals' sd exceeds
-the tolerance (or C_d^-1 is not positive: the arrivals alone do not fix it), or they lean
-away from the value without being sure of it. A value the table does not give (an empty clock_offset_end_s)
-is *estimated*, or undetermined when its sd exceeds the tolerance (then with a warning: the
-track rests on a value the data cannot check). What calibration does with a contradicted
-value (tracks with the arrivals' value) is `calibrate.release`'s.
+tolerance band); *undetermined* otherwise: the arrivals' sd exceeds the tolerance (or
+C_d^-1 is not positive: the arrivals alone do not fix it), or they lean away from the value
+without being sure of it, or the source is heard on fewer than `MIN_SOURCE_ARRIVALS` of the
+fit's arrivals (then without a value). A value the table does not give (an empty
+clock_offset_end_s) is *estimated*, or undetermined when its sd exceeds the tolerance (then
+with a warning: the track rests on a value the data cannot check). What calibration does
+with a contradicted value (tracks with the arrivals' value) is `calibrate.release`'s.
 """
 
 from __future__ import annotations
@@ -59,6 +60,10 @@ TOLERANCE_SETTING = {
 
 
 SOURCE_UNKNOWNS = ("east_km", "north_km", "offset_s", "drift_s_per_day")
+# A source on fewer confident arrivals than this is not judged (its checks undetermined,
+# without a value): the checks' sds hold only if the labels are right, and a source heard
+# a handful of times in a record is most often clutter that fell near its predicted times.
+MIN_SOURCE_ARRIVALS = 10
 
 
 @dataclass(frozen=True)
@@ -408,13 +413,14 @@ def _source_checks(
     """Each heard source's offset (at its epoch: a_i - d_i mid_i) and drift, from the
     arrivals' joint estimate of (a_i, d_i) and the clock offsets."""
     offset_sd, drift_sd = timing_prior_sd(problem, priors)
+    judged = _judged_sources(problem)
     found = []
     for h, row in enumerate(heard):
         # The clock's priors out too: a wrong clock offset moves every source's arrivals alike,
         # which is the clock's to explain, not each source's.
         index = [problem.per_beacon(0)[h], problem.per_beacon(1)[h], *_clock_index(problem)]
         joint = data_only(*post.block(index), np.array([offset_sd[h], drift_sd[h], *_clock_sd(problem)]))
-        arrivals = None if joint is None else (joint[0][:2], joint[1][:2, :2])
+        arrivals = None if joint is None or not judged[h] else (joint[0][:2], joint[1][:2, :2])
         file, line, name = beacon_source(beacons, int(row))
         at_epoch = np.array([1.0, -mid_days[h]])  # offset at the epoch = a - d mid
         values = (
@@ -433,6 +439,11 @@ def _source_checks(
             found.append(MetadataCheck(file, line, name, field, given, round(given + correction, digits),
                                        round(sd_d, digits), unit, outcome))  # fmt: skip
     return found
+
+
+def _judged_sources(problem: kalman.Problem) -> NDArray[np.bool_]:
+    """(H,) the heard sources with at least `MIN_SOURCE_ARRIVALS` arrivals in the fit."""
+    return np.bincount(problem.beacon, minlength=problem.n_heard) >= MIN_SOURCE_ARRIVALS
 
 
 def position_checks(
@@ -458,6 +469,7 @@ def position_checks(
     post = _Posterior.of(moved, start, fit, priors, columns)
     position_sd = position_prior_sd(moved, priors)
     offset_sd, drift_sd = timing_prior_sd(moved, priors)
+    judged = _judged_sources(moved)
     found = []
     for h, row in enumerate(heard):
         index = [moved.per_beacon(block)[h] for block in (3, 4, 0, 1)]
@@ -466,8 +478,12 @@ def position_checks(
         file, line, name = beacon_source(beacons, int(row))
         given = (float(beacons.lat[row]), float(beacons.lon[row]))
         check = _shift_check(
-            file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks.z_score
-        )
+            file, line, name, "position", given, arrivals if judged[h] else None,
+            checks.position_tolerance_km, checks.z_score,
+        )  # fmt: skip
+        if not judged[h]:
+            found.append(check)
+            continue
         at = (float(beacons.offset_s[row]), float(beacons.drift_s_per_day[row]))
         information = source_information(
             *post.block(index + clock), np.concatenate([prior_sd, _clock_sd(moved)]), float(mid_days[h]), at
