@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from rafostrack.filtering.resampling import ess, log_sum_exp, normalise_log_weights, quantile_points, systematic
+from rafostrack.filtering.resampling import (
+    _inverse_cdf,
+    ess,
+    log_sum_exp,
+    normalise_log_weights,
+    quantile_points,
+    systematic,
+)
 
 
 def test_systematic_copies_each_particle_floor_or_ceil_times():
@@ -63,3 +70,17 @@ def test_quantile_points_stand_for_the_weights():
     few[[3, 70, 900]] = [0.2, 0.3, 0.5]
     index, v = quantile_points(few, 400, prune=1e-14)
     assert index.tolist() == [3, 70, 900] and np.allclose(v, [0.2, 0.3, 0.5])
+
+
+def test_inverse_cdf_is_numpy_searchsorted_on_sorted_points():
+    """The merge search gives numpy's searchsorted (side "right") bit for bit: zero weights,
+    ties between a point and a cumulative sum, points from every scheme."""
+    rng = np.random.default_rng(5)
+    for n in (1, 7, 1000):
+        weights = rng.gamma(0.3, size=n) * (rng.random(n) > 0.3)
+        weights = weights / weights.sum() if weights.sum() > 0 else np.full(n, 1.0 / n)
+        cumulative = np.cumsum(weights)
+        cumulative[-1] = 1.0
+        ties = cumulative[cumulative < 1.0]  # points in [0, 1), as every scheme draws them
+        for points in (np.sort(rng.random(n)), (rng.random() + np.arange(n)) / n, ties):
+            assert np.array_equal(_inverse_cdf(weights, points), np.searchsorted(cumulative, points, side="right"))

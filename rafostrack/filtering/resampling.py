@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 Resampler = Callable[..., NDArray[np.intp]]  # (weights, rng, n=None) -> n ancestor indices
@@ -47,7 +48,22 @@ def _inverse_cdf(weights: NDArray, points: NDArray) -> NDArray[np.intp]:
     """Indices p with C_{p-1} <= u < C_p for sorted points u in [0, 1)."""
     cumulative = np.cumsum(weights)
     cumulative[-1] = 1.0  # guard against round-off leaving the last point unmatched
-    return np.searchsorted(cumulative, points, side="right")
+    out = np.empty(len(points), dtype=np.intp)
+    _merge_search(cumulative, np.ascontiguousarray(points, dtype=np.float64), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _merge_search(cumulative, points, out):  # pragma: no cover - compiled
+    """out[k] = the first p with cumulative[p] > points[k] (numpy's searchsorted, side
+    "right", capped at the last index), the points sorted: one pass over both, O(N + M),
+    where a binary search per point costs O(M log N) (eight times as long at 10,000)."""
+    p = 0
+    last = cumulative.shape[0] - 1
+    for k in range(points.shape[0]):
+        while p < last and cumulative[p] <= points[k]:
+            p += 1
+        out[k] = p
 
 
 def quantile_points(weights: NDArray, n: int, prune: float = 0.0) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
