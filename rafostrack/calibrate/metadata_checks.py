@@ -474,13 +474,12 @@ def position_checks(
     for h, row in enumerate(heard):
         index = [moved.per_beacon(block)[h] for block in (3, 4, 0, 1)]
         prior_sd = np.array([position_sd[h], position_sd[h], offset_sd[h], drift_sd[h]])
-        arrivals = data_only(*post.block(index), prior_sd)
+        arrivals = data_only(*post.block(index), prior_sd) if judged[h] else None
         file, line, name = beacon_source(beacons, int(row))
         given = (float(beacons.lat[row]), float(beacons.lon[row]))
         check = _shift_check(
-            file, line, name, "position", given, arrivals if judged[h] else None,
-            checks.position_tolerance_km, checks.z_score,
-        )  # fmt: skip
+            file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks.z_score
+        )
         if not judged[h]:
             found.append(check)
             continue
