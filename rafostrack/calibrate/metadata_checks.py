@@ -419,8 +419,9 @@ def _source_checks(
         # The clock's priors out too: a wrong clock offset moves every source's arrivals alike,
         # which is the clock's to explain, not each source's.
         index = [problem.per_beacon(0)[h], problem.per_beacon(1)[h], *_clock_index(problem)]
-        joint = data_only(*post.block(index), np.array([offset_sd[h], drift_sd[h], *_clock_sd(problem)]))
-        arrivals = None if joint is None or not judged[h] else (joint[0][:2], joint[1][:2, :2])
+        prior_sd = np.array([offset_sd[h], drift_sd[h], *_clock_sd(problem)])
+        joint = data_only(*post.block(index), prior_sd) if judged[h] else None
+        arrivals = None if joint is None else (joint[0][:2], joint[1][:2, :2])
         file, line, name = beacon_source(beacons, int(row))
         at_epoch = np.array([1.0, -mid_days[h]])  # offset at the epoch = a - d mid
         values = (
