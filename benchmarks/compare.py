@@ -34,7 +34,8 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from report import REPO
+
 SAMPLE = REPO / "data" / "samples" / "float767.csv"
 WARM_UP_PARTICLES = 100
 PARTS = ("total_s", "filter_s", "smoother_s", "calib_s")
