@@ -134,6 +134,18 @@ def test_toa_density_and_cdf_agree(eps, shape):
     assert m.toa_cdf(np.array(7.0), model) == pytest.approx(integrate.quad(density, -50, 7.0, limit=200)[0], abs=1e-8)
 
 
+def test_toa_density_of_an_array_is_its_values_one_by_one():
+    """An array of residuals, whatever its shape and layout (a transposed view here), gives
+    each value's density and CDF as if it were alone, in the array's shape."""
+    model = _model(toa_sigma_s=2.0, multipath_fraction=0.2, multipath_delay_s=10.0, multipath_delay_shape=2)
+    resid = np.random.default_rng(5).normal(0.0, 15.0, size=(4, 3)).T
+    for evaluate in (m.toa_logpdf, m.toa_cdf):
+        values = evaluate(resid, model)
+        assert values.shape == (3, 4)
+        alone = [[float(evaluate(np.array(r), model)) for r in row] for row in resid]
+        assert np.array_equal(values, np.array(alone))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("shape", [1, 2])
 @pytest.mark.parametrize(("sigma", "eps", "tau"), [(2.0, 0.1, 20.0), (1.0, 0.3, 5.0), (5.0, 0.2, 8.0)])

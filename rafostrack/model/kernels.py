@@ -28,8 +28,8 @@ digits to cancellation there, < 4), below it log psi(u) = log phi(u) - 2 log(-u)
 The scalar functions (`logpdf_c`, `cdf_c`, with constants computed once by `constants`) are
 compiled by numba and inlined into `factors_kernel` (numba's IR inlining: the delay law's
 branch then costs nothing measurable; without it the kernel ran 4-9% slower);
-`toa_logpdf_ufunc` and `toa_cdf_ufunc` are the same code as numpy ufuncs (broadcasting over
-arrays), so every caller uses one implementation. (Kernels calling one another live in this
+`toa_logpdf_kernel` and `toa_cdf_kernel` are the same code over flat arrays, so every
+caller uses one implementation. (Kernels calling one another live in this
 one module: numba's cache of a kernel is refreshed when its own file changes, not when a
 kernel it calls elsewhere does.)
 
@@ -46,7 +46,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange, vectorize
+from numba import njit, prange
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 FAR_EARLY = 9.0  # sds before the prediction: Gaussian e^-40, the delayed copy less
@@ -145,28 +145,19 @@ def cdf_c(r: float, c) -> float:  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _logpdf(r: float, sigma: float, eps: float, tau: float, shape: int) -> float:  # pragma: no cover - compiled
-    return logpdf_c(r, constants(sigma, eps, tau, shape))
+def toa_logpdf_kernel(r, sigma, eps, tau, shape, out):  # pragma: no cover - compiled
+    """out[n] = log f(r[n]) over flat arrays, the constants computed once."""
+    c = constants(sigma, eps, tau, shape)
+    for n in range(r.shape[0]):
+        out[n] = logpdf_c(r[n], c)
 
 
 @njit(cache=True, nogil=True)
-def _cdf(r: float, sigma: float, eps: float, tau: float, shape: int) -> float:  # pragma: no cover - compiled
-    return cdf_c(r, constants(sigma, eps, tau, shape))
-
-
-@vectorize(["float64(float64, float64, float64, float64, int64)"], cache=True)
-def toa_logpdf_ufunc(r, sigma, eps, tau, shape):  # pragma: no cover - compiled
-    return _logpdf(r, sigma, eps, tau, shape)
-
-
-@vectorize(["float64(float64, float64, float64, float64, int64)"], cache=True)
-def toa_cdf_ufunc(r, sigma, eps, tau, shape):  # pragma: no cover - compiled
-    return _cdf(r, sigma, eps, tau, shape)
-
-
-@vectorize(["float64(float64)"], cache=True)
-def log_ndtr_ufunc(z):  # pragma: no cover - compiled
-    return log_ndtr(z)
+def toa_cdf_kernel(r, sigma, eps, tau, shape, out):  # pragma: no cover - compiled
+    """out[n] = F(r[n]) over flat arrays, the constants computed once."""
+    c = constants(sigma, eps, tau, shape)
+    for n in range(r.shape[0]):
+        out[n] = cdf_c(r[n], c)
 
 
 @njit(cache=True, nogil=True)
@@ -206,12 +197,15 @@ def _factors_row(  # pragma: no cover - compiled
     early = -FAR_EARLY * sigma
     late = FAR_LATE * tau if eps > 0.0 else FAR_LATE_DIRECT * sigma
     for i in range(s):
-        log_pd = math.log(p_detect[p, i])
+        log_pd = math.nan  # taken at the first signal within reach: most beacons have none
         for j in range(k):
             r = toa[row, j] - mu[p, i]
             if r < early or r > late:
                 log_match[p, i, j] = -np.inf
-            elif added:
+                continue
+            if math.isnan(log_pd):
+                log_pd = math.log(p_detect[p, i])
+            if added:
                 log_match[p, i, j] = (log_pd + logpdf_c(r, c) - log_lam) + signal_term[row, j]
             else:
                 log_match[p, i, j] = log_pd + logpdf_c(r, c) - log_lam

@@ -32,15 +32,16 @@ Arrays are shaped (particles, beacons, signals) = (P, s, K).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ..config import ModelConfig
 from ..domain import BeaconTable, FloatInfo, elapsed_days
 from .geodesy import ranges_about_centre_m
-from .kernels import factors_kernel, factors_kernel_threaded, toa_cdf_ufunc, toa_logpdf_ufunc
+from .kernels import factors_kernel, factors_kernel_threaded, toa_cdf_kernel, toa_logpdf_kernel
 from .parallel import threaded
 
 
@@ -135,20 +136,31 @@ def beacon_prediction(
     return predicted_toa_s(ranges, wb, model), detection_prob(ranges, wb, model)
 
 
-def toa_logpdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
+def toa_logpdf(resid_s: ArrayLike, model: ModelConfig) -> NDArray[np.float64]:
     """log f(r) for the TOA error r = T - mu: a Gaussian of sd sigma, mixed with a delayed
     copy (multipath) of fraction eps, its delay Gamma of mean tau and shape k
     (`model.kernels`, where the formulas are)."""
-    return toa_logpdf_ufunc(
-        resid_s, model.toa_sigma_s, model.multipath_fraction, model.multipath_delay_s, model.multipath_delay_shape
-    )
+    return _elementwise(toa_logpdf_kernel, resid_s, model)
 
 
-def toa_cdf(resid_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
+def toa_cdf(resid_s: ArrayLike, model: ModelConfig) -> NDArray[np.float64]:
     """F(r) = P(T - mu <= r) for the density of `toa_logpdf` (`model.kernels`)."""
-    return toa_cdf_ufunc(
-        resid_s, model.toa_sigma_s, model.multipath_fraction, model.multipath_delay_s, model.multipath_delay_shape
+    return _elementwise(toa_cdf_kernel, resid_s, model)
+
+
+def _elementwise(kernel: Callable[..., None], resid_s: ArrayLike, model: ModelConfig) -> NDArray[np.float64]:
+    """`kernel` (`toa_logpdf_kernel`, `toa_cdf_kernel`) of each residual, in its shape."""
+    resid = np.asarray(resid_s, dtype=np.float64)
+    out = np.empty(resid.shape)
+    kernel(
+        resid.reshape(-1),
+        model.toa_sigma_s,
+        model.multipath_fraction,
+        model.multipath_delay_s,
+        model.multipath_delay_shape,
+        out.reshape(-1),
     )
+    return out
 
 
 def delay_log_shape(delay_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
