@@ -28,10 +28,10 @@ digits to cancellation there, < 4), below it log psi(u) = log phi(u) - 2 log(-u)
 The scalar functions (`logpdf_c`, `cdf_c`, with constants computed once by `constants`) are
 compiled by numba and inlined into `factors_kernel` (numba's IR inlining: the delay law's
 branch then costs nothing measurable; without it the kernel ran 4-9% slower);
-`toa_logpdf_kernel` and `toa_cdf_kernel` are the same code over flat arrays, so every
-caller uses one implementation. (Kernels calling one another live in this
-one module: numba's cache of a kernel is refreshed when its own file changes, not when a
-kernel it calls elsewhere does.)
+`toa_logpdf_kernel` and `toa_cdf_kernel` are the same code over flat arrays, the constants
+computed once per call, so every caller uses one implementation. (Kernels calling one
+another live in this one module: numba's cache of a kernel is refreshed when its own file
+changes, not when a kernel it calls elsewhere does.)
 
 `factors_kernel` computes log w_ij and log u_i (`model` module docstring) in one pass. A
 signal more than `FAR_EARLY` sds before a beacon's predicted arrival, or more than
