@@ -148,6 +148,7 @@ class ChecksConfig:
 class SmootherConfig:
     enabled: bool = setting()
     two_filter: bool = setting()
+    backward_particles: int = setting(">= 0", _non_negative)
 
 
 @dataclass(frozen=True)

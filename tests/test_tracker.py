@@ -149,6 +149,31 @@ def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_
     np.testing.assert_allclose(out.labels["prob"], whole.labels["prob"], atol=1e-9)
 
 
+def test_the_backward_filter_takes_at_most_backward_particles(sim_mission):
+    """`[smoother] backward_particles` caps the backward filter alone (0, or more than the
+    forward filter has: as many as the forward filter); the two filters' clouds, of
+    different sizes, still join into an accurate smoothed track."""
+    sim = sim_mission.floats[0]
+
+    def tracker(backward: int) -> Tracker:
+        config = with_overrides(
+            load_config(),
+            filter={"particles": 400, "seed": 1},
+            calibrate={"enabled": False},
+            smoother={"backward_particles": backward},
+        )
+        return Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, config))
+
+    for backward, expected in ((150, 150), (0, 400), (1000, 400)):
+        run = tracker(backward).run_filter(sim.record, label_probs=False, keep=True, backward=True)
+        assert {len(s.cloud.weights) for s in run.steps} == {expected}
+    forward = tracker(150).run_filter(sim.record, label_probs=False)
+    assert {len(s.cloud.weights) for s in forward.steps} == {400}
+    out = tracker(150).track(sim.record)
+    assert out.smoother == "two_filter"
+    assert np.sqrt(np.mean(position_errors_km(out.track, sim.truth) ** 2)) < 6.0
+
+
 @pytest.mark.parametrize("two_filter", [False, True], ids=["ffbsm", "two-filter"])
 def test_the_smoothed_tracks_ess_is_the_filters(sim_mission, two_filter):
     """track.parquet's `ess` is documented as the filter's effective sample size: the

@@ -106,6 +106,7 @@ class Tracker:
     factors: tuple[MoveFactor, ...] = ()
     guide: Guide | None = None  # part of each window's cloud drawn guided by it (`rafostrack.filtering.guided`)
     two_filter: bool = False  # smooth by joining a backward filter (`rafostrack.smoothing.two_filter`)
+    backward_particles: int = 0  # that backward filter's particles at most (0: the forward filter's)
     ffbsm_columns: int = MAX_COLUMNS  # FFBSm: quantile points of each step's cloud (`ffbsm.smooth`)
 
     @classmethod
@@ -130,6 +131,7 @@ class Tracker:
             end_fix=PositionFix(info.end_time, info.end_lat, info.end_lon, config.fixes.end_sd_km) if use_end else None,
             smooth=config.smoother.enabled,
             two_filter=config.smoother.two_filter,
+            backward_particles=config.smoother.backward_particles,
             ambiguity=config.ambiguity,
             seed=config.filter.seed,
             recovery=_recovery(config),
@@ -163,9 +165,9 @@ class Tracker:
         """The forward filter over the record (and the end fix), with the float's own
         generator; see `ParticleFilter.run` for `keep` and `on_step`. `backward`: the filter
         from the end fix back to the first window, with the drift reversed (its own
-        generator; `rafostrack.smoothing.two_filter`)."""
+        generator, at most `backward_particles` particles; `rafostrack.smoothing.two_filter`)."""
         info = self.info
-        motion, stream = self.motion, info.float_id
+        motion, stream, settings = self.motion, info.float_id, self.settings
         start = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
         events = observations(record.windows, self.end_fix)
         if backward:
@@ -173,12 +175,14 @@ class Tracker:
                 raise ValueError(f"{info.float_id}: a backward filter starts from the end fix, and there is none")
             motion, stream = self.motion.reversed(), f"{info.float_id} backward"
             start, events = self.end_fix, list(reversed(record.windows))
+            if 0 < self.backward_particles < settings.particles:
+                settings = dataclasses.replace(settings, particles=self.backward_particles)
         fixes = PositionFixLikelihood(info.float_id)
         pf = ParticleFilter(
             motion,
             self.arrivals,
             fixes,
-            self.settings,
+            settings,
             label_probs=label_probs,
             recovery=self.recovery,
             factors=self.factors,

@@ -173,9 +173,12 @@ def two_filter_smooth(
     n_windows = len(forward) - 1
     if len(backward) != n_windows + 1 or len(forward_loglik) != n_windows or len(backward_loglik) != n_windows:
         raise ValueError("forward and backward filters must cover the same windows")
+    # Each filter's kernels by its own particle count (its prior's: the filters' later clouds
+    # come as quantile points); the backward filter may have fewer particles.
     h2 = silverman_bandwidth(len(forward[0].weights), motion.dim) ** 2 if regularise else 0.0
+    h2_back = silverman_bandwidth(len(backward[-1].weights), motion.dim) ** 2 if regularise else 0.0
     forward_spread = [h2 * cloud_covariance(c) for c in forward[:-1]]
-    backward_spread = [h2 * cloud_covariance(c) for c in backward[1:]]
+    backward_spread = [h2_back * cloud_covariance(c) for c in backward[1:]]
     clouds, kernels = [], []
     for k in range(n_windows):
         now = forward[k + 1]
