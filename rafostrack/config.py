@@ -148,7 +148,7 @@ class ChecksConfig:
 class SmootherConfig:
     enabled: bool = setting()
     two_filter: bool = setting()
-    backward_particles: int = setting(">= 0", _non_negative)
+    backward_particles: int = setting("0 or >= 2", lambda v: v == 0 or v >= 2)
 
 
 @dataclass(frozen=True)
