@@ -16,9 +16,11 @@ when the ratios of all rounds lie below 1 and below the spread of the machine: o
 0.977-0.988 over three rounds at 1000 particles, so a few percent is not a change. Also
 printed: whether the two trees' tracks and labels are the same bits (a change that keeps
 them is judged on time alone; otherwise the robustness run judges its accuracy,
-`benchmarks/robustness.py`).
+`benchmarks/robustness.py`). With `--all-cores` the processes run as `rafostrack track` runs
+on this machine: on every core, with numba's threads and the backward filter forked beside
+the forward one (`rafostrack.run.forked`).
 
-    python benchmarks/compare.py REV [--particles 1000] [--rounds 3] [--float-file FILE] [--core 0]
+    python benchmarks/compare.py REV [--particles 1000] [--rounds 3] [--float-file FILE] [--core 0] [--all-cores]
 """
 
 from __future__ import annotations
@@ -48,10 +50,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--float-file", type=Path, default=SAMPLE)
     parser.add_argument("--core", type=int, default=0, help="the CPU core the timed processes run on")
+    parser.add_argument("--all-cores", action="store_true", help="time on every core, as `rafostrack track` runs")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        if hasattr(os, "sched_setaffinity"):  # Linux: this process on one core
+        if hasattr(os, "sched_setaffinity") and not args.all_cores:  # Linux: this process on one core
             os.sched_setaffinity(0, {args.core})
         print(json.dumps(_timed_track(args.float_file, args.particles)))
         return
@@ -69,7 +72,8 @@ def main() -> None:
 
 def _compare(new_tree: Path, old_tree: Path, args: argparse.Namespace) -> None:
     """Time the rounds (module docstring) and print them, the ratios and the outputs' identity."""
-    print(f"{args.float_file.name}, {args.particles} particles, core {args.core}: new = this working tree, "
+    where = "every core" if args.all_cores else f"core {args.core}"
+    print(f"{args.float_file.name}, {args.particles} particles, {where}: new = this working tree, "
           f"old = {args.rev}")  # fmt: skip
     print(f"{'round':>5} {'tree':>4} " + " ".join(f"{p:>10}" for p in PARTS) + f" {'new/old':>8}")
     runs: dict[str, list[dict]] = {"new": [], "old": []}
@@ -90,11 +94,14 @@ def _compare(new_tree: Path, old_tree: Path, args: argparse.Namespace) -> None:
 
 
 def _child(tree: Path, args: argparse.Namespace) -> dict:
-    """One timed track in a process of its own with `tree`'s package, on `args.core`."""
-    env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-           "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}  # fmt: skip
+    """One timed track in a process of its own with `tree`'s package, on `args.core` (or on
+    every core)."""
+    one_thread = dict.fromkeys(("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"), "1")
+    env = {**os.environ, "PYTHONPATH": str(tree), **({} if args.all_cores else one_thread)}
     command = [sys.executable, str(Path(__file__).resolve()), "--child", "--particles", str(args.particles),
                "--float-file", str(args.float_file.resolve()), "--core", str(args.core)]  # fmt: skip
+    if args.all_cores:
+        command.append("--all-cores")
     done = subprocess.run(command, env=env, cwd=tree, capture_output=True, text=True)
     if done.returncode != 0:
         sys.exit(f"the track with {tree} failed:\n{done.stderr.strip()}")

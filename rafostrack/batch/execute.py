@@ -35,12 +35,12 @@ from ..io.outdir import staging_dir, swap_into_place
 from ..io.writers import write_json
 from .lock import read_lock_info
 from .plan import FAILED, MANIFEST, MANIFEST_FORMAT, PROCESSED, FloatOutcome, FloatTask
-from .workers import one_kernel_thread
 
 
 def process_float(task: FloatTask) -> FloatOutcome:
     """Track one float into a temporary sibling directory, write its manifest last, then swap
     it into place. Never raises: a failure is returned as an outcome with a one-line reason."""
+    from ..model.parallel import kernel_threads
     from ..run.one_float import TrackInputs, track_float
 
     started = time.perf_counter()
@@ -53,7 +53,7 @@ def process_float(task: FloatTask) -> FloatOutcome:
         if staging.exists():
             shutil.rmtree(staging)
         inputs = TrackInputs(float_path=task.float_path, config_files=task.config_files, overrides=task.overrides)
-        with one_kernel_thread():
+        with kernel_threads(1):  # one float per core
             result = track_float(inputs, staging, plots=task.plots)
         built = Path(result.out_dir)
         files = {p.name: p.stat().st_size for p in sorted(built.iterdir()) if p.is_file()}

@@ -47,17 +47,3 @@ def single_threaded_math() -> contextlib.AbstractContextManager[None]:
     """While worker processes start, set the math libraries' thread counts to 1 in the
     environment they inherit, unless the user set them."""
     return environment(dict.fromkeys(MATH_THREAD_VARS, "1"), keep_existing=True)
-
-
-@contextlib.contextmanager
-def one_kernel_thread() -> Iterator[None]:
-    """Run the compiled kernels on this thread alone for the duration (one float per core:
-    a batch task, on a local worker or a Dask one), then as before."""
-    import numba
-
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)

@@ -9,6 +9,9 @@ machine; a batch worker has one, `batch.workers`) and there are enough items to 
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 import numba
 
 PARALLEL_MIN_ITEMS = 256  # fewer: starting the threads costs more than they save
@@ -17,3 +20,16 @@ PARALLEL_MIN_ITEMS = 256  # fewer: starting the threads costs more than they sav
 def threaded(items: int) -> bool:
     """Whether a kernel over `items` independent items runs on numba's threads."""
     return items >= PARALLEL_MIN_ITEMS and numba.get_num_threads() > 1
+
+
+@contextlib.contextmanager
+def kernel_threads(count: int) -> Iterator[None]:
+    """Run the compiled kernels on at most `count` of numba's threads (this Python thread's
+    setting) for the duration, then as before: one for a batch task (one float per core), half
+    for a computation that shares the machine with another (`run.forked`)."""
+    before = numba.get_num_threads()
+    numba.set_num_threads(count)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)

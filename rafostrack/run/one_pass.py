@@ -37,6 +37,7 @@ from ..problem import FloatProblem
 from ..smoothing.ffbsm import MAX_COLUMNS, Smoothed, column_points, smooth
 from ..smoothing.two_filter import JOIN_COLUMNS, forward_view, two_filter_smooth
 from ..summaries.estimates import Estimate, EstimateBuilder, Regions, build_estimate
+from .forked import Forked
 
 
 @dataclass(frozen=True)
@@ -227,13 +228,12 @@ class Tracker:
         run = self.run_filter(record, label_probs=label_probs, keep=False, on_step=keep, backward=backward)
         return dataclasses.replace(run, steps=kept)
 
-    def _smooth(self, run: FilterResult, record: ArrivalRecord, two_filter: bool) -> tuple[list[Step], Smoothed]:
+    def _smooth(self, run: FilterResult, back: FilterResult | None) -> tuple[list[Step], Smoothed]:
         """The steps to summarise and their smoothed weights: FFBSm on the forward filter's
-        clouds, or, with `two_filter` (`_joins_two_filters`), both filters joined
-        (`rafostrack.smoothing.two_filter`)."""
-        if not two_filter:
+        clouds, or, given the backward filter's run `back` (`_joins_two_filters`), both
+        filters joined (`rafostrack.smoothing.two_filter`)."""
+        if back is None:
             return run.steps, smooth([s.cloud for s in run.steps], self.motion, max_columns=self.ffbsm_columns)
-        back = self._run_kept(record, JOIN_COLUMNS, backward=True)
         windows, end = run.steps[:-1], run.steps[-1]
         if run.prior is None or back.prior is None or any(s.window is None for s in windows) or end.window is not None:
             raise ValueError(f"{self.info.float_id}: the forward filter's steps are not the windows and the end fix")
@@ -265,7 +265,8 @@ class Tracker:
         so memory does not grow with the record. Smoothing keeps every step's cloud on at
         most `ffbsm_columns` quantile points of its weights (FFBSm), or each filter's
         on `two_filter.JOIN_COLUMNS` (`_run_kept`): at most 80 KB per window with a
-        velocity, whatever the particle count."""
+        velocity, whatever the particle count. The two-filter smoother's backward filter
+        runs beside the forward one where a core is idle (`_backward`)."""
         started = time.perf_counter()
         filtered = EstimateBuilder(self.info.float_id, self.beacon_ids, self.ambiguity, "filtered", self._regions())
         summarised = filtered if also_filtered or not self.smooth else None
@@ -278,12 +279,14 @@ class Tracker:
                 estimate, estimate, run.n_resamples, run.warnings, elapsed, 0.0, **_counts(run, filtered)
             )
         two_filter = self._joins_two_filters(record)
-        run = self._run_kept(
-            record, JOIN_COLUMNS if two_filter else self.ffbsm_columns, label_probs=also_filtered, on_step=on_step
-        )
-        filter_s = time.perf_counter() - started
-        started = time.perf_counter()
-        estimate = self._smoothed_estimate(run, record, two_filter, extra_cov)
+        with self._backward(record, two_filter) as backward:
+            run = self._run_kept(
+                record, JOIN_COLUMNS if two_filter else self.ffbsm_columns, label_probs=also_filtered, on_step=on_step
+            )
+            filter_s = time.perf_counter() - started
+            started = time.perf_counter()
+            back = backward.result()
+        estimate = self._smoothed_estimate(run, back, extra_cov)
         smoother_s = time.perf_counter() - started
         return TrackOutput(
             estimate,
@@ -294,6 +297,14 @@ class Tracker:
             smoother_s,
             **_counts(run),
             smoother="two_filter" if two_filter else "ffbsm",
+        )
+
+    def _backward(self, record: ArrivalRecord, two_filter: bool) -> Forked[FilterResult | None]:
+        """The two-filter smoother's backward filter (kept as `_run_kept` keeps), None without
+        it; in a forked child beside the forward filter where a core is idle (`run.forked`),
+        the same bits as after it."""
+        return Forked(
+            lambda: self._run_kept(record, JOIN_COLUMNS, backward=True) if two_filter else None, fork=two_filter
         )
 
     def _on_step(
@@ -320,13 +331,12 @@ class Tracker:
     def _smoothed_estimate(
         self,
         run: FilterResult,
-        record: ArrivalRecord,
-        two_filter: bool,
+        back: FilterResult | None,
         extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
     ) -> Estimate:
         """The smoothed estimate of a kept run (`_smooth`): each window's position covariance
         with the smoother's kernel covariance and `extra_cov` added."""
-        steps, smoothed = self._smooth(run, record, two_filter)
+        steps, smoothed = self._smooth(run, back)
         times = np.array([s.cloud.time for s in steps], dtype="datetime64[ns]")
         nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))
         return build_estimate(

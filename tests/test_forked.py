@@ -1,0 +1,104 @@
+"""A computation run beside this process (`rafostrack.run.forked`): the same value as
+computed here, an error never lost in the child, and the backward filter beside the forward
+one giving the same track bit for bit."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+import numba
+import numpy as np
+import pandas as pd
+import pytest
+
+from rafostrack.config import load_config, with_overrides
+from rafostrack.problem import FloatProblem
+from rafostrack.run import forked
+from rafostrack.run.forked import Forked
+from rafostrack.run.one_pass import Tracker
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="rafostrack forks on Linux only")
+
+
+@pytest.fixture
+def spare_core(monkeypatch) -> list[int]:
+    """A core to spare, whatever this machine has (one kernel thread each); the list grows
+    by one for each child forked."""
+    forks: list[int] = []
+
+    def one_thread_each() -> tuple[int, int]:
+        forks.append(1)
+        return 1, 1
+
+    monkeypatch.setattr(forked, "threads_beside", one_thread_each)
+    return forks
+
+
+def _draws_and_pid() -> tuple[np.ndarray, int]:
+    return np.random.default_rng(5).normal(size=1000), os.getpid()
+
+
+def test_a_forked_computation_gives_what_computing_here_gives(spare_core):
+    with Forked(_draws_and_pid) as beside:
+        during = numba.get_num_threads()
+        draws, pid = beside.result()
+    assert spare_core == [1] and during == 1
+    assert pid != os.getpid()  # computed in the child
+    np.testing.assert_array_equal(draws, _draws_and_pid()[0])
+
+
+def test_without_a_core_to_spare_it_is_computed_here(monkeypatch):
+    monkeypatch.setattr(forked, "threads_beside", lambda: None)
+    with Forked(_draws_and_pid) as beside:
+        assert beside.result()[1] == os.getpid()
+    with Forked(_draws_and_pid, fork=False) as beside:  # not worth a process
+        assert beside.result()[1] == os.getpid()
+
+
+def test_the_kernel_threads_come_back_however_the_block_ends(spare_core):
+    before = numba.get_num_threads()
+    with pytest.raises(KeyboardInterrupt), Forked(_draws_and_pid):
+        raise KeyboardInterrupt  # Ctrl-C during the forward filter: the child is ended
+    assert numba.get_num_threads() == before and spare_core == [1]
+
+
+def test_a_child_that_fails_leaves_the_computation_here(spare_core):
+    """Killed, raising, or with a value it cannot send: the computation runs again here,
+    where its value is the same and its error has a traceback."""
+    parent = os.getpid()
+
+    def killed_in_the_child() -> int:
+        if os.getpid() != parent:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return 42
+
+    def raising_in_the_child() -> int:
+        if os.getpid() != parent:
+            raise MemoryError
+        return 43
+
+    def unpicklable_in_the_child() -> object:
+        return (lambda: 44) if os.getpid() != parent else 44
+
+    for compute, value in ((killed_in_the_child, 42), (raising_in_the_child, 43), (unpicklable_in_the_child, 44)):
+        with Forked(compute) as beside:
+            assert beside.result() == value
+    with pytest.raises(ZeroDivisionError), Forked(lambda: 1 / 0) as beside:
+        beside.result()
+    assert len(spare_core) == 4
+
+
+def test_the_backward_filter_beside_the_forward_one_gives_the_same_bits(sim_mission, spare_core, monkeypatch):
+    """The two-filter smoother with its backward filter in a child and after the forward
+    filter here: the same track and labels, bit for bit."""
+    sim = sim_mission.floats[0]
+    config = with_overrides(load_config(), filter={"particles": 300}, smoother={"two_filter": True})
+    tracker = Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, config))
+    beside = tracker.track(sim.record)
+    assert spare_core == [1] and beside.smoother == "two_filter"
+    monkeypatch.setattr(forked, "threads_beside", lambda: None)
+    after = tracker.track(sim.record)
+    pd.testing.assert_frame_equal(beside.track, after.track, check_exact=True)
+    pd.testing.assert_frame_equal(beside.labels, after.labels, check_exact=True)
