@@ -17,8 +17,8 @@ when the ratios of all rounds lie below 1 and below the spread of the machine: o
 printed: whether the two trees' tracks and labels are the same bits (a change that keeps
 them is judged on time alone; otherwise the robustness run judges its accuracy,
 `benchmarks/robustness.py`). With `--all-cores` the processes run as `rafostrack track` runs
-on this machine: on every core, with numba's threads and the backward filter forked beside
-the forward one (`rafostrack.run.forked`).
+on this machine: on every core, with numba's threads and part of the work forked beside
+(`rafostrack.run.forked`).
 
     python benchmarks/compare.py REV [--particles 1000] [--rounds 3] [--float-file FILE] [--core 0] [--all-cores]
 """

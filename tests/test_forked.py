@@ -1,6 +1,7 @@
 """A computation run beside this process (`rafostrack.run.forked`): the same value as
-computed here, an error never lost in the child, and the backward filter beside the forward
-one giving the same track bit for bit."""
+computed here, an error never lost in the child, and the two-filter smoother's work beside
+(the backward filter, half the windows' join and summaries) giving the same track bit for
+bit."""
 
 from __future__ import annotations
 
@@ -91,14 +92,15 @@ def test_a_child_that_fails_leaves_the_computation_here(spare_core):
 
 
 def test_the_backward_filter_beside_the_forward_one_gives_the_same_bits(sim_mission, spare_core, monkeypatch):
-    """The two-filter smoother with its backward filter in a child and after the forward
-    filter here: the same track and labels, bit for bit."""
+    """The two-filter smoother with its backward filter and half of its windows' join in
+    children, and all of it here: the same track, labels and modes, bit for bit."""
     sim = sim_mission.floats[0]
     config = with_overrides(load_config(), filter={"particles": 300}, smoother={"two_filter": True})
     tracker = Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, config))
     beside = tracker.track(sim.record)
-    assert spare_core == [1] and beside.smoother == "two_filter"
+    assert spare_core == [1, 1] and beside.smoother == "two_filter"  # the backward filter; half the join
     monkeypatch.setattr(forked, "threads_beside", lambda: None)
     after = tracker.track(sim.record)
     pd.testing.assert_frame_equal(beside.track, after.track, check_exact=True)
     pd.testing.assert_frame_equal(beside.labels, after.labels, check_exact=True)
+    pd.testing.assert_frame_equal(beside.estimate.modes, after.estimate.modes, check_exact=True)

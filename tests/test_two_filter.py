@@ -154,3 +154,19 @@ def test_a_stretch_the_forward_filter_lost_is_taken_from_the_backward_filter():
     # the backward filter they stay within 2.5 sd (seeds 0-4: 0.3-2.4), the rest within Monte
     # Carlo error.
     assert np.abs(joined).max() < 2.5 and np.sqrt(np.mean(joined**2)) < 0.5
+
+
+def test_each_window_is_joined_on_its_own():
+    """Joined in two parts (as `rafostrack track` joins them in two processes), the windows
+    are the same bits as joined together."""
+    motion = LINEAR_GAUSSIAN_CASES[sorted(MOTION_MODELS)[0]]
+    _, _, forward, f_ev, backward, b_ev, _ = _both_filters(motion, 9, 300, seed=3)
+    whole_clouds, whole = two_filter_smooth(forward, f_ev, backward, b_ev, motion)
+    parts = [two_filter_smooth(forward, f_ev, backward, b_ev, motion, windows=w) for w in (range(4), range(4, 9))]
+    clouds = [c for part_clouds, _ in parts for c in part_clouds]
+    assert len(clouds) == len(whole_clouds) == 9
+    for a, b in zip(clouds, whole_clouds, strict=True):
+        np.testing.assert_array_equal(a.weights, b.weights)
+        np.testing.assert_array_equal(a.lat, b.lat)
+    kernels = [k for _, part in parts for k in part.kernel_cov_km2]
+    np.testing.assert_array_equal(np.array(kernels), np.array(whole.kernel_cov_km2))

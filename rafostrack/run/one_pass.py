@@ -36,7 +36,7 @@ from ..motion import ClockWalk, JumpMixture, MotionModel, motion_from_config
 from ..problem import FloatProblem
 from ..smoothing.ffbsm import MAX_COLUMNS, Smoothed, column_points, smooth
 from ..smoothing.two_filter import JOIN_COLUMNS, forward_view, two_filter_smooth
-from ..summaries.estimates import Estimate, EstimateBuilder, Regions, build_estimate
+from ..summaries.estimates import Estimate, EstimateBuilder, Regions
 from .forked import Forked
 
 
@@ -228,26 +228,6 @@ class Tracker:
         run = self.run_filter(record, label_probs=label_probs, keep=False, on_step=keep, backward=backward)
         return dataclasses.replace(run, steps=kept)
 
-    def _smooth(self, run: FilterResult, back: FilterResult | None) -> tuple[list[Step], Smoothed]:
-        """The steps to summarise and their smoothed weights: FFBSm on the forward filter's
-        clouds, or, given the backward filter's run `back` (`_joins_two_filters`), both
-        filters joined (`rafostrack.smoothing.two_filter`)."""
-        if back is None:
-            return run.steps, smooth([s.cloud for s in run.steps], self.motion, max_columns=self.ffbsm_columns)
-        windows, end = run.steps[:-1], run.steps[-1]
-        if run.prior is None or back.prior is None or any(s.window is None for s in windows) or end.window is not None:
-            raise ValueError(f"{self.info.float_id}: the forward filter's steps are not the windows and the end fix")
-        clouds, smoothed = two_filter_smooth(
-            [run.prior, *(s.cloud for s in windows)],
-            [s.loglik for s in windows],
-            forward_view([back.prior, *(s.cloud for s in back.steps)]),
-            [s.loglik for s in reversed(back.steps)],
-            self.motion,
-        )
-        steps = [dataclasses.replace(s, cloud=c) for s, c in zip(windows, clouds, strict=True)] + [end]
-        weights = [*smoothed.weights, end.cloud.weights]
-        return steps, Smoothed(weights, [*smoothed.kernel_cov_km2, np.zeros((2, 2))])
-
     def track(
         self,
         record: ArrivalRecord,
@@ -268,7 +248,7 @@ class Tracker:
         velocity, whatever the particle count. The two-filter smoother's backward filter
         runs beside the forward one where a core is idle (`_backward`)."""
         started = time.perf_counter()
-        filtered = EstimateBuilder(self.info.float_id, self.beacon_ids, self.ambiguity, "filtered", self._regions())
+        filtered = self._builder("filtered")
         summarised = filtered if also_filtered or not self.smooth else None
         on_step = self._on_step(record, summarised, extra_cov, progress)
         if not self.smooth:
@@ -334,21 +314,68 @@ class Tracker:
         back: FilterResult | None,
         extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
     ) -> Estimate:
-        """The smoothed estimate of a kept run (`_smooth`): each window's position covariance
-        with the smoother's kernel covariance and `extra_cov` added."""
-        steps, smoothed = self._smooth(run, back)
+        """The smoothed estimate of a kept run: FFBSm on the forward filter's clouds, or, given
+        the backward filter's run `back` (`_joins_two_filters`), both filters joined
+        (`_joined`). Each window is joined and summarised on its own: the later half of the
+        steps beside the earlier half where a core is idle (`run.forked`), the same bits."""
+        steps = run.steps
+        if back is None:
+            smoothed = smooth([s.cloud for s in steps], self.motion, max_columns=self.ffbsm_columns)
+
+            def part(among: range) -> EstimateBuilder:
+                return self._summarised([steps[k] for k in among], smoothed.part(among), extra_cov)
+        else:
+            steps = steps[:-1]  # the windows (then the end fix: no output row)
+
+            def part(among: range) -> EstimateBuilder:
+                return self._joined(run, back, among, extra_cov)
+
+        half, count = len(steps) // 2, len(steps)
+        with Forked(lambda: part(range(half, count)).rows(), fork=half > 0) as later:
+            builder = part(range(half))
+            builder.extend(later.result())
+        return builder.result()
+
+    def _joined(
+        self,
+        run: FilterResult,
+        back: FilterResult,
+        windows: range,
+        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
+    ) -> EstimateBuilder:
+        """The forward filter's `windows` (indices of its steps) joined with the backward
+        filter (`rafostrack.smoothing.two_filter`), summarised (`_summarised`)."""
+        steps, end = run.steps[:-1], run.steps[-1]
+        if run.prior is None or back.prior is None or any(s.window is None for s in steps) or end.window is not None:
+            raise ValueError(f"{self.info.float_id}: the forward filter's steps are not the windows and the end fix")
+        clouds, smoothed = two_filter_smooth(
+            [run.prior, *(s.cloud for s in steps)],
+            [s.loglik for s in steps],
+            forward_view([back.prior, *(s.cloud for s in back.steps)]),
+            [s.loglik for s in reversed(back.steps)],
+            self.motion,
+            windows=windows,
+        )
+        joined = [dataclasses.replace(steps[k], cloud=c) for k, c in zip(windows, clouds, strict=True)]
+        return self._summarised(joined, smoothed, extra_cov)
+
+    def _summarised(
+        self,
+        steps: list[Step],
+        smoothed: Smoothed,
+        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
+    ) -> EstimateBuilder:
+        """`steps` summarised under their `smoothed` weights, labels from the smoothed
+        clouds; each window's position covariance with the smoother's kernel covariance and
+        `extra_cov` added."""
         times = np.array([s.cloud.time for s in steps], dtype="datetime64[ns]")
         nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))
-        return build_estimate(
-            self.info.float_id,
-            steps,
-            self.beacon_ids,
-            self.ambiguity,
-            smoothed,
-            self.arrivals.label_probs,
-            extra_cov_km2=nuisance + np.array(smoothed.kernel_cov_km2).reshape(-1, 2, 2),
-            regions=self._regions(),
-        )
+        kernels = np.array(smoothed.kernel_cov_km2).reshape(-1, 2, 2)
+        return self._builder("smoothed").add_steps(steps, smoothed, self.arrivals.label_probs, nuisance + kernels)
+
+    def _builder(self, kind: str) -> EstimateBuilder:
+        """An empty estimate of this float, `kind` "filtered" or "smoothed"."""
+        return EstimateBuilder(self.info.float_id, self.beacon_ids, self.ambiguity, kind, self._regions())
 
 
 def _counts(run: FilterResult, builder: EstimateBuilder | None = None) -> dict[str, Any]:

@@ -135,6 +135,10 @@ class Smoothed:
     weights: list[NDArray[np.float64]]
     kernel_cov_km2: list[NDArray[np.float64]]
 
+    def part(self, steps: range) -> Smoothed:
+        """Those of `steps` (a range of step indices) only."""
+        return Smoothed(self.weights[steps.start : steps.stop], self.kernel_cov_km2[steps.start : steps.stop])
+
 
 def column_points(cloud: Cloud, max_columns: int) -> tuple[Cloud, NDArray[np.intp]]:
     """The cloud on at most `max_columns` of its particles (quantile points of its weights),

@@ -161,6 +161,7 @@ def two_filter_smooth(
     regularise: bool = True,
     max_columns: int = JOIN_COLUMNS,
     max_rows: int = MAX_ROWS,
+    windows: range | None = None,
 ) -> tuple[list[Cloud], Smoothed]:
     """Smoothed marginals of windows 1..K (module docstring) on both filters' particles.
 
@@ -169,7 +170,9 @@ def two_filter_smooth(
     the end fix, all in time order with forward velocities (`forward_view`). The log
     evidences are each filter's at the K windows (nan: a skipped step, counted as 0).
     Returns the K union clouds with their smoothed weights, and the same as `Smoothed`
-    (weights, and the kernel covariance each particle stands for)."""
+    (weights, and the kernel covariance each particle stands for); of `windows` only (indices
+    0..K-1) when given: each window's join is its own, the same bits whichever others are
+    joined."""
     n_windows = len(forward) - 1
     if len(backward) != n_windows + 1 or len(forward_loglik) != n_windows or len(backward_loglik) != n_windows:
         raise ValueError("forward and backward filters must cover the same windows")
@@ -177,15 +180,14 @@ def two_filter_smooth(
     # come as quantile points); the backward filter may have fewer particles.
     h2 = silverman_bandwidth(len(forward[0].weights), motion.dim) ** 2 if regularise else 0.0
     h2_back = silverman_bandwidth(len(backward[-1].weights), motion.dim) ** 2 if regularise else 0.0
-    forward_spread = [h2 * cloud_covariance(c) for c in forward[:-1]]
-    backward_spread = [h2_back * cloud_covariance(c) for c in backward[1:]]
     clouds, kernels = [], []
-    for k in range(n_windows):
+    for k in range(n_windows) if windows is None else windows:
         now = forward[k + 1]
         if backward[k].time != now.time:
             raise ValueError(f"backward filter at {backward[k].time}, forward at {now.time}")
-        before = _neighbour(forward[k], now.time, motion, forward_spread[k], before=True, max_rows=max_rows)
-        after = _neighbour(backward[k + 1], now.time, motion, backward_spread[k], before=False, max_rows=max_rows)
+        spread_before, spread_after = h2 * cloud_covariance(forward[k]), h2_back * cloud_covariance(backward[k + 1])
+        before = _neighbour(forward[k], now.time, motion, spread_before, before=True, max_rows=max_rows)
+        after = _neighbour(backward[k + 1], now.time, motion, spread_after, before=False, max_rows=max_rows)
         evidence = (float(np.nan_to_num(forward_loglik[k])), float(np.nan_to_num(backward_loglik[k])))
         joined = join_window(before, now, backward[k], after, evidence, motion, max_columns)
         clouds.append(joined)

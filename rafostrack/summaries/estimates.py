@@ -68,6 +68,16 @@ def label_rows(
     return rows
 
 
+@dataclass(frozen=True)
+class EstimateRows:
+    """Rows of an estimate's tables (`EstimateBuilder.rows`), and the filter's ESS of each window."""
+
+    track: list[tuple]
+    labels: list[tuple]
+    modes: list[tuple]
+    window_ess: list[float]
+
+
 # Association marginals (s, K) of a window under some weights, and their beacon-table rows.
 LabelProbs = Callable[[Particles, NDArray, Window], tuple[NDArray, NDArray]]
 # Region labels of particles (regions parted by forbidden ground), or None.
@@ -145,6 +155,37 @@ class EstimateBuilder:
         heard = float(probs.sum()) if probs.size else 0.0  # expected signals from beacons
         self._track[-1] = (*self._track[-1], window_status(step.reseeded_mass, modes.ambiguous, heard))
 
+    def add_steps(
+        self,
+        steps: Sequence[Step],
+        smoothed: Smoothed | None = None,
+        label_probs: LabelProbs | None = None,
+        extra_cov_km2: NDArray | None = None,
+    ) -> EstimateBuilder:
+        """Summarise every step (`add`): under its filter weights, or under the `smoothed`
+        weights (one array per step) with labels from `label_probs`; `extra_cov_km2` (one
+        (2, 2) per step) widens the covariances. Returns the builder."""
+        extra = [None] * len(steps) if extra_cov_km2 is None else list(extra_cov_km2)
+        if smoothed is None:
+            for step, cov in zip(steps, extra, strict=True):
+                self.add(step, extra_cov_km2=cov)
+        else:
+            for step, weights, cov in zip(steps, smoothed.weights, extra, strict=True):
+                self.add(step, weights, label_probs, cov)
+        return self
+
+    def rows(self) -> EstimateRows:
+        """The rows added so far, for another builder to `extend` with (they pickle: a
+        process that summarised some windows sends them to the one that has the others)."""
+        return EstimateRows(self._track, self._labels, self._modes, self.window_ess)
+
+    def extend(self, rows: EstimateRows) -> None:
+        """Append `rows` of later windows than those added so far."""
+        self._track.extend(rows.track)
+        self._labels.extend(rows.labels)
+        self._modes.extend(rows.modes)
+        self.window_ess.extend(rows.window_ess)
+
     def _modes_of(self, cloud: Cloud, weights: NDArray, extra_cov_km2: NDArray | None) -> Modes:
         """The cloud's two-mode summary under `weights` (`posterior.two_modes`), by regions
         when the context parts them."""
@@ -207,18 +248,10 @@ def build_estimate(
     extra_cov_km2: NDArray | None = None,
     regions: Regions | None = None,
 ) -> Estimate:
-    """Tables for every window among `steps`: filtered (each step's own weights), or under
-    the `smoothed` weights (one array per step) with labels from `label_probs`;
-    `extra_cov_km2` (one (2, 2) per step) widens the covariances."""
+    """Tables for every window among `steps` (`EstimateBuilder.add_steps`): filtered, or
+    under the `smoothed` weights."""
     builder = EstimateBuilder(float_id, beacon_ids, ambiguity, "filtered" if smoothed is None else "smoothed", regions)
-    extra = [None] * len(steps) if extra_cov_km2 is None else list(extra_cov_km2)
-    if smoothed is None:
-        for step, cov in zip(steps, extra, strict=True):
-            builder.add(step, extra_cov_km2=cov)
-    else:
-        for step, weights, cov in zip(steps, smoothed.weights, extra, strict=True):
-            builder.add(step, weights, label_probs, cov)
-    return builder.result()
+    return builder.add_steps(steps, smoothed, label_probs, extra_cov_km2).result()
 
 
 def runs_of(times: NDArray[np.datetime64], flags: ArrayLike) -> list[tuple[np.datetime64, np.datetime64]]:
