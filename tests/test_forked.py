@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 
 import numba
 import numpy as np
@@ -56,6 +57,16 @@ def test_without_a_core_to_spare_it_is_computed_here(monkeypatch):
         assert beside.result()[1] == os.getpid()
     with Forked(_draws_and_pid, fork=False) as beside:  # not worth a process
         assert beside.result()[1] == os.getpid()
+
+
+def test_only_the_main_thread_forks():
+    """A program tracking from threads of its own computes there: a thread forking while
+    another holds a lock the child needs would leave the child waiting for ever."""
+    seen: list[tuple[int, int] | None] = []
+    worker = threading.Thread(target=lambda: seen.append(forked.threads_beside()))
+    worker.start()
+    worker.join()
+    assert seen == [None]
 
 
 def test_the_kernel_threads_come_back_however_the_block_ends(spare_core):

@@ -8,22 +8,26 @@ numba's threads (`model.parallel.kernel_threads`), which give the same bits for 
 count.
 
 It is used where there is a core to spare: Linux (whose `fork` copies this process, its
-inputs and its compiled kernels, in milliseconds) and numba with more than one thread; a
-batch worker runs one thread (one float per core), so batches never fork. Anywhere else,
+inputs and its compiled kernels, in milliseconds), the main thread (a program that tracks
+from several threads of its own keeps them all here), and numba with more than one thread;
+a batch worker runs one thread (one float per core), so batches never fork. Anywhere else,
 and whenever the child fails (an exception, killed, out of memory), the computation runs
 here when its result is asked for: then an error is raised here, with its traceback, and
 never lost in a child.
 
-The child is forked while numba's idle worker threads exist; it runs only serial kernels,
-numpy and the pipe back, and takes none of their locks.
+The child is forked while numba's idle worker threads (and, on a terminal, the progress
+bar's) exist: it runs only serial kernels, numpy and the pipe back, takes none of their
+locks, and leaves at once (`os._exit`), without flushing the standard streams it shares.
 """
 
 from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import os
 import signal
 import sys
+import threading
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
@@ -39,9 +43,11 @@ T = TypeVar("T")
 
 def threads_beside() -> tuple[int, int] | None:
     """numba threads for this process and for a forked child computing beside it, or None
-    when this process has no core to spare (one kernel thread) or cannot fork (not Linux)."""
+    when this process has no core to spare (one kernel thread) or does not fork (not Linux,
+    not the main thread)."""
     threads = numba.get_num_threads()
-    if threads < 2 or not sys.platform.startswith("linux"):
+    main = threading.current_thread() is threading.main_thread()
+    if threads < 2 or not main or not sys.platform.startswith("linux"):
         return None
     return threads - threads // 2, threads // 2
 
@@ -112,7 +118,8 @@ class Forked(Generic[T]):
 
 def _child(compute: Callable[[], Any], send: Connection, threads: int) -> None:
     """The forked child: compute on `threads` kernel threads and send the value back in a
-    1-tuple, or None when computing (or pickling the value) failed; Ctrl-C is the parent's."""
+    1-tuple, or None when computing (or pickling the value) failed; Ctrl-C is the parent's.
+    It leaves at once, without the interpreter's and multiprocessing's exit work."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         with kernel_threads(threads):
@@ -122,3 +129,4 @@ def _child(compute: Callable[[], Any], send: Connection, threads: int) -> None:
         send.send(None)
     finally:
         send.close()
+        os._exit(0)
