@@ -6,8 +6,9 @@ pass plus smoothed labels and summaries) and calibration (the Kalman fit and ass
 EM), with the track's RMSE against the sample's truth, the labels right and the median ESS
 of the last pass; `--profile` then prints, per pass and calibration, the seconds of each
 stage of the method (motion, ranges, association, smoother, ...: `stages.py`), for finding
-what to optimise. Run on one core (`OMP_NUM_THREADS=1 taskset -c 0`) for figures
-that do not depend on what else runs.
+what to optimise, on one kernel thread (all the work in this process: work forked beside it,
+`rafostrack.run.forked`, would escape the stages' timers). Run on one core
+(`OMP_NUM_THREADS=1 taskset -c 0`) for figures that do not depend on what else runs.
 
     python benchmarks/speed.py [--methods exact bp] [--particles 1000 10000] [--config FILE] [--profile]
                                [--report docs/validation.md]
@@ -30,6 +31,7 @@ from report import machine, markdown_table, write_section
 from stages import stage_table
 
 from rafostrack.config import method_overrides, with_overrides
+from rafostrack.model.parallel import kernel_threads
 from rafostrack.run.method import track_record
 from rafostrack.run.one_float import TrackInputs, load_float
 from rafostrack.sim.evaluate import association_accuracy, rmse_km
@@ -78,7 +80,8 @@ def main() -> None:
             )
             if args.profile:
                 problem = loaded.problem.with_config(config)
-                table = stage_table(lambda: track_record(problem, loaded.record))  # noqa: B023
+                with kernel_threads(1):
+                    table = stage_table(lambda: track_record(problem, loaded.record))  # noqa: B023
                 title = f"Seconds per call and stage ({method}, {particles} particles; stages.py):"
                 print(f"\n{title}")
                 print(table.to_string(index=False, float_format=lambda x: f"{x:.2f}"), "\n", flush=True)
