@@ -115,3 +115,20 @@ def test_the_backward_filter_beside_the_forward_one_gives_the_same_bits(sim_miss
     pd.testing.assert_frame_equal(beside.track, after.track, check_exact=True)
     pd.testing.assert_frame_equal(beside.labels, after.labels, check_exact=True)
     pd.testing.assert_frame_equal(beside.estimate.modes, after.estimate.modes, check_exact=True)
+
+
+def test_the_source_scan_tries_its_candidates_in_order_half_of_them_beside(spare_core, monkeypatch):
+    """Each candidate schedule's pass (here a stand-in that says where it ran), the later
+    half in the child: the passes in the candidates' order, every pass's seconds counted."""
+    from rafostrack.run import method
+
+    def tracked(problem, calibration, record, spent, checks=None):
+        spent["filter_s"] += 1.0
+        return checks, os.getpid()
+
+    monkeypatch.setattr(method, "_calibrated_pass", tracked)
+    spent = {"filter_s": 0.5, "smoother_s": 0.0}
+    trials = method._trials(None, None, None, spent, [["a"], ["b"], ["c"]])
+    assert [checks for checks, _ in trials] == [["a"], ["b"], ["c"]]
+    assert [pid == os.getpid() for _, pid in trials] == [True, True, False]
+    assert spent == {"filter_s": 3.5, "smoother_s": 0.0} and spare_core == [1]

@@ -44,6 +44,7 @@ from ..domain import ArrivalRecord
 from ..io.records import with_longer_window
 from ..motion import ClockWalk
 from ..problem import FloatProblem
+from .forked import Forked
 from .one_pass import Tracker, TrackOutput
 
 # FFBSm quantile points per step in the passes that feed calibration. Their track and labels
@@ -263,7 +264,7 @@ def _scanned_schedules(
         ]
         spent["calibrate_s"] += time.perf_counter() - started
         tried_candidates = candidates[:SCHEDULE_TRIALS]
-        trials = [_calibrated_pass(problem, calibration, record, spent, checks=c.checks) for c in tried_candidates]
+        trials = _trials(problem, calibration, record, spent, [c.checks for c in tried_candidates])
         gains = [_record_evidence(trial) - _record_evidence(out) for trial in trials]
         if not gains or max(gains) <= threshold:
             break
@@ -281,6 +282,30 @@ def _scanned_schedules(
         done |= {check.id for check in checks} | set(others)
         out = _calibrated_pass(problem, calibration, record, spent)
     return problem, out, calibration, found
+
+
+def _trials(
+    problem: FloatProblem,
+    calibration: Calibration,
+    record: ArrivalRecord,
+    spent: dict[str, float],
+    candidates: list[list[MetadataCheck]],
+) -> list[TrackOutput]:
+    """The pass of each candidate schedule (`_calibrated_pass` with its checks), the later
+    half tracked beside the earlier half where a core is idle (`run.forked`): each pass is
+    its own, the same bits. `spent` adds the seconds of all of them."""
+    half = (len(candidates) + 1) // 2
+
+    def later() -> tuple[list[TrackOutput], dict[str, float]]:
+        theirs = dict.fromkeys(spent, 0.0)
+        return [_calibrated_pass(problem, calibration, record, theirs, checks=c) for c in candidates[half:]], theirs
+
+    with Forked(later, fork=len(candidates) > half) as beside:
+        trials = [_calibrated_pass(problem, calibration, record, spent, checks=c) for c in candidates[:half]]
+        rest, theirs = beside.result()
+    for part, seconds in theirs.items():
+        spent[part] += seconds
+    return trials + rest
 
 
 def _record_evidence(out: TrackOutput) -> float:
