@@ -24,9 +24,10 @@ def threaded(items: int) -> bool:
 
 @contextlib.contextmanager
 def kernel_threads(count: int) -> Iterator[None]:
-    """Run the compiled kernels on at most `count` of numba's threads (this Python thread's
-    setting) for the duration, then as before: one for a batch task (one float per core), half
-    for a computation that shares the machine with another (`run.forked`)."""
+    """Run the compiled kernels on `count` of numba's threads (at least 1, at most
+    `NUMBA_NUM_THREADS`; this Python thread's setting) for the duration, then as before: one
+    for a batch task (one float per core), half for a computation that shares the machine
+    with another (`run.forked`)."""
     before = numba.get_num_threads()
     numba.set_num_threads(count)
     try:

@@ -1,11 +1,14 @@
 """A computation run beside this process, on a core it leaves idle.
 
-`rafostrack track` on a multi-core machine runs the last pass's backward filter in a forked
-child while the forward filter runs here (`one_pass.Tracker.track`): the two filters share
-nothing but their inputs, and each draws from its own generator, so the result is the same
-bits as computing one after the other. Each process then runs the compiled kernels on half of
+`rafostrack track` on a multi-core machine runs independent pieces of its work in a forked
+child while the rest runs here: the last pass's backward filter beside the forward filter
+(`one_pass.Tracker.track`: the two share nothing but their inputs, and each draws from its
+own generator), the later half of a smoother's windows beside the earlier half (each window
+is joined and summarised on its own, `Tracker._smoothed_estimate`), and the source scan's
+later candidate passes beside the first (`method._trials`). So the result is the same bits
+as computing one piece after the other. Each process runs the compiled kernels on half of
 numba's threads (`model.parallel.kernel_threads`), which give the same bits for any thread
-count.
+count; a piece computed beside forks no further on a machine of two cores.
 
 It is used where there is a core to spare: Linux (whose `fork` copies this process, its
 inputs and its compiled kernels, in milliseconds), the main thread (a program that tracks
