@@ -38,7 +38,9 @@ from pathlib import Path
 
 from report import REPO
 
-SAMPLE = REPO / "data" / "samples" / "float767.csv"
+from rafostrack.sim.scenarios import sample_mission_dir
+
+SAMPLE = sample_mission_dir() / "float767.csv"
 WARM_UP_PARTICLES = 100
 PARTS = ("total_s", "filter_s", "smoother_s", "calib_s")
 

@@ -40,6 +40,7 @@ from rafostrack.legs.summaries import velocity_samples
 from rafostrack.model.geodesy import local_offsets_km
 from rafostrack.run.one_float import TrackInputs
 from rafostrack.sim.evaluate import inside_ellipse, position_errors_km
+from rafostrack.sim.scenarios import sample_mission_dir
 from rafostrack.summaries.posterior import ELLIPSE_95_SCALE
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -125,7 +126,7 @@ def score(float_file: Path, out_root: Path) -> dict[str, Any]:
     }
 
 
-SAMPLE_FLOAT = Path(__file__).parents[1] / "rafostrack" / "data" / "samples" / "float767.csv"
+SAMPLE_FLOAT = sample_mission_dir() / "float767.csv"
 
 
 def time_sample_float(out: Path) -> None:

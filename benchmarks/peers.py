@@ -91,8 +91,9 @@ from rafostrack.problem import FloatProblem
 from rafostrack.run.one_float import TrackInputs, load_float
 from rafostrack.run.one_pass import Tracker
 from rafostrack.sim.evaluate import rmse_km
+from rafostrack.sim.scenarios import sample_mission_dir
 
-SAMPLE = Path(__file__).resolve().parents[1] / "rafostrack" / "data" / "samples" / "float767.csv"
+SAMPLE = sample_mission_dir() / "float767.csv"
 HALF_LOG_2PI = 0.5 * np.log(2.0 * np.pi)
 WARMUP_WINDOWS = 5
 WARMUP_PARTICLES = 200

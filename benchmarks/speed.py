@@ -35,8 +35,9 @@ from rafostrack.model.parallel import kernel_threads
 from rafostrack.run.method import track_record
 from rafostrack.run.one_float import TrackInputs, load_float
 from rafostrack.sim.evaluate import association_accuracy, rmse_km
+from rafostrack.sim.scenarios import sample_mission_dir
 
-SAMPLE = Path(__file__).resolve().parents[1] / "data" / "samples" / "float767.csv"
+SAMPLE = sample_mission_dir() / "float767.csv"
 
 
 def main() -> None:
