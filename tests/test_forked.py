@@ -1,7 +1,7 @@
 """A computation run beside this process (`rafostrack.run.forked`): the same value as
-computed here, an error never lost in the child, and the two-filter smoother's work beside
-(the backward filter, half the windows' join and summaries) giving the same track bit for
-bit."""
+computed here, an error never lost in the child, the two-filter smoother's work beside (the
+backward filter, half the windows' join and summaries) giving the same track bit for bit,
+and the source scan's candidates tried half beside."""
 
 from __future__ import annotations
 
@@ -59,14 +59,15 @@ def test_without_a_core_to_spare_it_is_computed_here(monkeypatch):
         assert beside.result()[1] == os.getpid()
 
 
-def test_only_the_main_thread_forks():
+def test_only_the_main_thread_forks(monkeypatch):
     """A program tracking from threads of its own computes there: a thread forking while
     another holds a lock the child needs would leave the child waiting for ever."""
+    monkeypatch.setattr(numba, "get_num_threads", lambda: 2)  # two cores, whatever this machine has
     seen: list[tuple[int, int] | None] = []
     worker = threading.Thread(target=lambda: seen.append(forked.threads_beside()))
     worker.start()
     worker.join()
-    assert seen == [None]
+    assert seen == [None] and forked.threads_beside() == (1, 1)
 
 
 def test_the_kernel_threads_come_back_however_the_block_ends(spare_core):
