@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from ..config import AmbiguityConfig, Config
 from ..context.floats import context_factors
-from ..domain import ArrivalRecord, FloatInfo, Particles, PositionFix
+from ..domain import ArrivalRecord, Cloud, FloatInfo, Particles, PositionFix
 from ..filtering.filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
 from ..filtering.guided import Guide
 from ..filtering.recovery import RecoverySettings
@@ -316,8 +316,9 @@ class Tracker:
     ) -> Estimate:
         """The smoothed estimate of a kept run: FFBSm on the forward filter's clouds, or, given
         the backward filter's run `back` (`_joins_two_filters`), both filters joined
-        (`_joined`). Each window is joined and summarised on its own: the later half of the
-        steps beside the earlier half where a core is idle (`run.forked`), the same bits."""
+        (`rafostrack.smoothing.two_filter`). Each window is joined and summarised on its own:
+        the later half of the steps beside the earlier half where a core is idle
+        (`run.forked`), the same bits."""
         steps = run.steps
         if back is None:
             smoothed = smooth([s.cloud for s in steps], self.motion, max_columns=self.ffbsm_columns)
@@ -325,10 +326,12 @@ class Tracker:
             def part(among: range) -> EstimateBuilder:
                 return self._summarised([steps[k] for k in among], smoothed.part(among), extra_cov)
         else:
-            steps = steps[:-1]  # the windows (then the end fix: no output row)
+            steps, inputs = self._join_inputs(run, back)
 
             def part(among: range) -> EstimateBuilder:
-                return self._joined(run, back, among, extra_cov)
+                clouds, smoothed = two_filter_smooth(*inputs, self.motion, windows=among)
+                joined = [dataclasses.replace(steps[k], cloud=c) for k, c in zip(among, clouds, strict=True)]
+                return self._summarised(joined, smoothed, extra_cov)
 
         half, count = len(steps) // 2, len(steps)
         with Forked(lambda: part(range(half, count)).rows(), fork=half > 0) as later:
@@ -336,28 +339,18 @@ class Tracker:
             builder.extend(later.result())
         return builder.result()
 
-    def _joined(
-        self,
-        run: FilterResult,
-        back: FilterResult,
-        windows: range,
-        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
-    ) -> EstimateBuilder:
-        """The forward filter's `windows` (indices of its steps) joined with the backward
-        filter (`rafostrack.smoothing.two_filter`), summarised (`_summarised`)."""
+    def _join_inputs(
+        self, run: FilterResult, back: FilterResult
+    ) -> tuple[list[Step], tuple[list[Cloud], list[float], list[Cloud], list[float]]]:
+        """The forward filter's steps at the windows (its last is the end fix) and what
+        `two_filter_smooth` joins them from: each filter's clouds and step evidences, the
+        backward filter's in time order."""
         steps, end = run.steps[:-1], run.steps[-1]
         if run.prior is None or back.prior is None or any(s.window is None for s in steps) or end.window is not None:
             raise ValueError(f"{self.info.float_id}: the forward filter's steps are not the windows and the end fix")
-        clouds, smoothed = two_filter_smooth(
-            [run.prior, *(s.cloud for s in steps)],
-            [s.loglik for s in steps],
-            forward_view([back.prior, *(s.cloud for s in back.steps)]),
-            [s.loglik for s in reversed(back.steps)],
-            self.motion,
-            windows=windows,
-        )
-        joined = [dataclasses.replace(steps[k], cloud=c) for k, c in zip(windows, clouds, strict=True)]
-        return self._summarised(joined, smoothed, extra_cov)
+        forward = [run.prior, *(s.cloud for s in steps)]
+        backward = forward_view([back.prior, *(s.cloud for s in back.steps)])
+        return steps, (forward, [s.loglik for s in steps], backward, [s.loglik for s in reversed(back.steps)])
 
     def _summarised(
         self,
