@@ -9,17 +9,18 @@ the same bit for bit on any machine.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from ..model.geodesy import displace, local_offsets_km
 
-# Semi-axis scale of the 95% ellipse of a 2-D Gaussian: sqrt(chi2_2(0.95)) = 2.4477.
-ELLIPSE_95_SCALE = float(np.sqrt(chi2.ppf(0.95, 2)))
+# Semi-axis scale of the 95% ellipse of a 2-D Gaussian: sqrt(chi2_2(0.95)) = 2.4477, the
+# chi-square quantile with 2 degrees of freedom in closed form, -2 log(1 - p).
+ELLIPSE_95_SCALE = math.sqrt(-2.0 * math.log1p(-0.95))
 
 
 @dataclass(frozen=True)
