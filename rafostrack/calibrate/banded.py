@@ -35,7 +35,9 @@ class BorderedBanded:
     first `n_band` unknowns form the band of half-width `bandwidth`."""
 
     def __init__(self, normal: sparse.spmatrix, n_band: int, bandwidth: int):
-        coo = sparse.coo_matrix(normal)
+        normal = sparse.csr_matrix(normal)
+        normal.sum_duplicates()  # one entry per (row, column), each placed below (free when so already)
+        coo = normal.tocoo()
         r, c, v = coo.row, coo.col, coo.data
         self.n, self.b = n_band, bandwidth
         m = normal.shape[0] - n_band
@@ -43,13 +45,13 @@ class BorderedBanded:
         inside = (r < n_band) & (c < n_band) & (r >= c)
         if np.any(r[inside] - c[inside] > bandwidth):
             raise ValueError(f"the matrix is not banded with half-width {bandwidth}")
-        np.add.at(band, (r[inside] - c[inside], c[inside]), v[inside])
+        band[r[inside] - c[inside], c[inside]] = v[inside]
         self.border = np.zeros((n_band, m))
         edge = (r < n_band) & (c >= n_band)
-        np.add.at(self.border, (r[edge], c[edge] - n_band), v[edge])
+        self.border[r[edge], c[edge] - n_band] = v[edge]
         corner = np.zeros((m, m))
         low = (r >= n_band) & (c >= n_band)
-        np.add.at(corner, (r[low] - n_band, c[low] - n_band), v[low])
+        corner[r[low] - n_band, c[low] - n_band] = v[low]
         self.chol = cholesky_banded(band, lower=True)
         # C' B^-1 C = H'H with H = L^-1 C (B = L L'): one triangular solve per column, not two.
         half, info = dtbtrs(self.chol, self.border, uplo="L") if m else (self.border, 0)

@@ -158,8 +158,9 @@ class Rows:
         """Rows with whitened residuals `residual` (m,) and Jacobian entries, each a pair
         (columns (m,), values (m,)): one nonzero per row per pair."""
         m = len(residual)
-        cols = np.stack([np.broadcast_to(col, (m,)) for col, _ in entries], axis=1).astype(np.intp)
-        vals = np.stack([np.broadcast_to(val, (m,)) for _, val in entries], axis=1).astype(float)
+        cols, vals = np.empty((m, len(entries)), dtype=np.intp), np.empty((m, len(entries)))
+        for a, (col, val) in enumerate(entries):  # each broadcast to the rows
+            cols[:, a], vals[:, a] = col, val
         self.blocks.append(Block(np.asarray(residual, dtype=float), cols, vals))
         self.log_whitening += log_whitening
         self.n += m
