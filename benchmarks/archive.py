@@ -69,6 +69,17 @@ def dimes_archive_floats(n_floats: int | None = None) -> list[FloatInfo]:
     ]
 
 
+def write_archive(mission: Path, n_floats: int | None, seed: int) -> tuple[list[FloatInfo], int]:
+    """Simulate the first `n_floats` DIMES floats (all: None) into the mission directory
+    `mission`, without a rafostrack.toml (the default settings, as for a user's archive);
+    the floats and the number of windows."""
+    floats = dimes_archive_floats(n_floats)
+    simulated = simulate_mission(dimes_scenario()[0], floats, load_config().model, np.random.default_rng(seed))
+    write_mission(simulated, mission)
+    (mission / "rafostrack.toml").unlink()
+    return floats, sum(len(f.record.windows) for f in simulated.floats)
+
+
 def _rafostrack() -> str:
     exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
     if exe is None:
@@ -104,15 +115,10 @@ def main() -> None:
     root = args.keep or Path(tempfile.mkdtemp(prefix="rafostrack-archive-"))
     try:
         mission = root / "archive" / "dimes"
-        beacons, _ = dimes_scenario()
-        floats = dimes_archive_floats(args.floats)
         started = time.perf_counter()
-        simulated = simulate_mission(beacons, floats, load_config().model, np.random.default_rng(args.seed))
-        write_mission(simulated, mission)
-        (mission / "rafostrack.toml").unlink()  # the default settings, as for a user's archive
-        n_windows = sum(len(f.record.windows) for f in simulated.floats)
+        floats, n_windows = write_archive(mission, args.floats, args.seed)
         print(
-            f"archive: {len(floats)} DIMES floats, {len(beacons)} sources, {n_windows} windows "
+            f"archive: {len(floats)} DIMES floats, {len(dimes_scenario()[0])} sources, {n_windows} windows "
             f"({n_windows / len(floats):.0f} per float), simulated in {time.perf_counter() - started:.0f} s; "
             f"{args.jobs} job(s) on {default_jobs()} core(s)"
         )
