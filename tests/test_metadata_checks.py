@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -41,6 +42,7 @@ from rafostrack.errors import Warnings
 from rafostrack.io.records import csv_names, window_arrivals, with_longer_window
 from rafostrack.model.geodesy import displace
 from rafostrack.problem import FloatProblem
+from rafostrack.run import forked
 from rafostrack.run.method import track_record
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import simulate_mission
@@ -155,6 +157,75 @@ def test_a_scanned_schedule_that_another_source_explains_as_well_names_both():
     ]
     assert check.as_json()["other_sources"] == ("UK1-1",)
     assert "other_sources" not in dataclasses.replace(check, other_sources=()).as_json()
+
+
+@dataclasses.dataclass(frozen=True)
+class _Table:
+    """A stand-in problem for the scan's choice: the sources its table corrects."""
+
+    config: object
+    beacons: tuple[str, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class _Pass:
+    evidence: float
+    estimate: object = None
+
+
+class _Calibration:
+    hyper = None
+
+    def calibrated(self, problem):
+        return problem
+
+
+@pytest.mark.parametrize(
+    ("refit_evidence", "kept", "others"),
+    [
+        ({"UK1-1": -4500.0, "UK1-4": -4700.0}, "UK1-1", ()),  # the trials' order reversed by the refits
+        ({"UK1-1": -4700.0, "UK1-4": -4500.0}, "UK1-4", ()),
+        ({"UK1-1": -4500.0, "UK1-4": -4505.0}, "UK1-1", ("UK1-4",)),  # within z^2 / 2 = 12.5: both named
+    ],
+)
+def test_the_scan_keeps_the_contender_whose_refitted_pass_has_the_highest_evidence(
+    monkeypatch, refit_evidence, kept, others
+):
+    """Two candidates whose trials (with the calibration of the table as given) both raise
+    the record's evidence beyond the margin: each table is calibrated and tracked again, and
+    the one whose pass has the higher evidence is kept (UK1-4's trial was the higher here),
+    the other named with it only when its pass is within the margin. A third candidate that
+    gains too little is not refitted."""
+    from rafostrack.run import method
+
+    trial_evidence = {"UK1-1": -4884.5, "UK1-4": -4871.1, "UK1-3": -5050.0}  # the pass as given: -5058.6
+    offered = [[MetadataCheck("beacons.csv", 10, source, "offset_s", 0.0, 1.0, 1.0, "s", CONTRADICTED)]
+               for source in ("UK1-1", "UK1-4", "UK1-3")]  # fmt: skip
+    monkeypatch.setattr(
+        method, "schedule_candidates",
+        lambda problem, *_: [] if problem.beacons else [SimpleNamespace(checks=c) for c in offered],
+    )  # fmt: skip
+    monkeypatch.setattr(method, "with_supported_schedule", lambda beacons, checks: (*beacons, checks[0].id))
+    refitted = []
+    monkeypatch.setattr(
+        method, "calibrate", lambda estimate, record, tried, start: refitted.append(tried) or _Calibration()
+    )
+    monkeypatch.setattr(forked, "threads_beside", lambda: None)  # all here, where `refitted` sees it
+
+    def tracked(problem, calibration, record, spent, checks=None):
+        if checks is not None:
+            return _Pass(trial_evidence[checks[0].id])
+        return _Pass(refit_evidence[problem.beacons[-1]])
+
+    monkeypatch.setattr(method, "_calibrated_pass", tracked)
+    monkeypatch.setattr(method, "_record_evidence", lambda out: out.evidence)
+    table = _Table(CONFIG)
+    problem, out, _, found = method._scanned_schedules(
+        table, None, _Calibration(), _Pass(-5058.6), {"calibrate_s": 0.0}
+    )
+    assert [t.beacons for t in refitted] == [("UK1-4",), ("UK1-1",)]
+    assert problem.beacons == (kept,) and out.evidence == refit_evidence[kept]
+    assert [(c.id, c.other_sources) for c in found] == [(kept, others)]
 
 
 @pytest.fixture(scope="module")

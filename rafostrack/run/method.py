@@ -31,6 +31,8 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from functools import partial
+from typing import TypeVar
 
 import numpy as np
 
@@ -55,6 +57,7 @@ CALIBRATION_COLUMNS = 512
 MAX_SCHEDULE_FINDINGS = 4  # sources whose schedule the scan corrects at most (`_scanned_schedules`)
 SCHEDULE_TRIALS = 3  # candidates tracked again per scan (`_scanned_schedules`)
 
+T = TypeVar("T")
 PassProgress = Callable[[int], Callable[[int, int], None] | None]  # pass number -> its progress callback
 
 
@@ -244,44 +247,68 @@ def _scanned_schedules(
     """Sources whose schedule in the table the arrivals contradict (`calibrate.source_scan`),
     one at a time: the `SCHEDULE_TRIALS` strongest candidates along the track of `out` (a
     pass tracked with `calibration`), each a different source, are tried by tracking the
-    record again with the same calibration and the candidate's schedule; the one whose
-    trial raises the record's evidence (the filter's sum of log p(y_t | y_1..t-1) over the
-    windows) most, by more than `[checks] z_score`^2 / 2 (the likelihood-ratio counterpart
-    of z sds), is kept. Another candidate within that margin of it explains the arrivals
-    as well: the finding names its source too (`MetadataCheck.other_sources`: the arrivals
-    cannot tell which source's schedule is wrong). The corrected table is then calibrated,
-    tracked and scanned again, each source at most once. The problem, pass and
-    calibration to go on with, and the contradicted values kept. `spent` adds the seconds."""
+    record again with the same calibration and the candidate's schedule. A trial that
+    raises the record's evidence (the filter's sum of log p(y_t | y_1..t-1) over the
+    windows) by more than `[checks] z_score`^2 / 2 (the likelihood-ratio counterpart of z
+    sds) makes its candidate a contender. Each contender's table is calibrated and tracked
+    again (`_refitted_pass`), and the one whose pass has the highest evidence is kept: the
+    trials share the calibration fitted to the table as given, which the wrong schedule has
+    pulled, and there a shift of another source can explain the signals better than the
+    true fix does. Another candidate within the margin of the kept one explains the
+    arrivals as well: the finding names its source too (`MetadataCheck.other_sources`: the
+    arrivals cannot tell which source's schedule is wrong). The corrected table is then
+    scanned again, each source at most once. The problem, pass and calibration to go on
+    with, and the contradicted values kept. `spent` adds the seconds."""
     threshold = problem.config.checks.z_score**2 / 2
     found: list[MetadataCheck] = []
     done: set[str] = set()  # the sources a finding named
     for _ in range(MAX_SCHEDULE_FINDINGS):
         started = time.perf_counter()
         candidates = [
-            c
+            c.checks
             for c in schedule_candidates(problem, calibration.calibrated(problem), out.estimate, record)
             if not done & {check.id for check in c.checks}
-        ]
+        ][:SCHEDULE_TRIALS]
         spent["calibrate_s"] += time.perf_counter() - started
-        tried_candidates = candidates[:SCHEDULE_TRIALS]
-        trials = _trials(problem, calibration, record, spent, [c.checks for c in tried_candidates])
-        gains = [_record_evidence(trial) - _record_evidence(out) for trial in trials]
-        if not gains or max(gains) <= threshold:
+        trials = _trials(problem, calibration, record, spent, candidates)
+        gains = np.array([_record_evidence(trial) - _record_evidence(out) for trial in trials])
+        contenders = [int(k) for k in np.argsort(-gains, kind="stable") if gains[k] > threshold]
+        jobs = [partial(_refitted_pass, problem, candidates[k], trials[k], record, calibration) for k in contenders]
+        refits = _each_beside(jobs, spent)
+        scored = [(k, refit) for k, refit in zip(contenders, refits, strict=True) if refit is not None]
+        if not scored:
             break
-        best = int(np.argmax(gains))
-        close = [k for k in range(len(gains)) if k != best and gains[best] - gains[k] <= threshold]
-        others = tuple(tried_candidates[k].checks[0].id for k in close)
-        checks = [dataclasses.replace(check, other_sources=others) for check in tried_candidates[best].checks]
-        started = time.perf_counter()
-        tried = dataclasses.replace(problem, beacons=with_supported_schedule(problem.beacons, checks))
-        refitted = calibrate(trials[best].estimate, record, tried, start=calibration.hyper)
-        spent["calibrate_s"] += time.perf_counter() - started
-        if refitted is None:
-            break
-        problem, calibration, found = tried, refitted, found + checks
+        # One contender: its trial's gain; more: the evidence of each one's refitted pass.
+        score = {k: gains[k] if len(scored) == 1 else _record_evidence(refit[2]) for k, refit in scored}
+        best, (problem, calibration, out) = max(scored, key=lambda item: score[item[0]])
+        close = [k for k in score if k != best and score[best] - score[k] <= threshold]
+        close += [k for k in range(len(gains)) if k not in score and gains[best] - gains[k] <= threshold]
+        others = tuple(candidates[k][0].id for k in sorted(close))
+        checks = [dataclasses.replace(check, other_sources=others) for check in candidates[best]]
+        found += checks
         done |= {check.id for check in checks} | set(others)
-        out = _calibrated_pass(problem, calibration, record, spent)
     return problem, out, calibration, found
+
+
+def _refitted_pass(
+    problem: FloatProblem,
+    checks: list[MetadataCheck],
+    trial: TrackOutput,
+    record: ArrivalRecord,
+    calibration: Calibration,
+    spent: dict[str, float],
+) -> tuple[FloatProblem, Calibration, TrackOutput] | None:
+    """The table with the schedule of `checks`, calibrated from its `trial` pass (the
+    search starting at `calibration`'s hyperparameters) and tracked with that calibration;
+    None when the trial has too few confident arrivals to calibrate. `spent` adds the
+    seconds."""
+    started = time.perf_counter()
+    tried = dataclasses.replace(problem, beacons=with_supported_schedule(problem.beacons, checks))
+    refitted = calibrate(trial.estimate, record, tried, start=calibration.hyper)
+    spent["calibrate_s"] += time.perf_counter() - started
+    if refitted is None:
+        return None
+    return tried, refitted, _calibrated_pass(tried, refitted, record, spent)
 
 
 def _trials(
@@ -291,21 +318,27 @@ def _trials(
     spent: dict[str, float],
     candidates: list[list[MetadataCheck]],
 ) -> list[TrackOutput]:
-    """The pass of each candidate schedule (`_calibrated_pass` with its checks), the later
-    half tracked beside the earlier half where a core is idle (`run.forked`): each pass is
-    its own, the same bits. `spent` adds the seconds of all of them."""
-    half = (len(candidates) + 1) // 2
+    """The pass of each candidate schedule (`_calibrated_pass` with its checks, the same
+    calibration), in the candidates' order (`_each_beside`). `spent` adds the seconds."""
+    return _each_beside([partial(_calibrated_pass, problem, calibration, record, checks=c) for c in candidates], spent)
 
-    def later() -> tuple[list[TrackOutput], dict[str, float]]:
+
+def _each_beside(jobs: list[Callable[[dict[str, float]], T]], spent: dict[str, float]) -> list[T]:
+    """job(spent) for each job, in order, the later half computed beside the earlier half
+    where a core is idle (`run.forked`): each job is its own computation, the same bits.
+    `spent` adds the seconds of all of them."""
+    half = (len(jobs) + 1) // 2
+
+    def later() -> tuple[list[T], dict[str, float]]:
         theirs = dict.fromkeys(spent, 0.0)
-        return [_calibrated_pass(problem, calibration, record, theirs, checks=c) for c in candidates[half:]], theirs
+        return [job(theirs) for job in jobs[half:]], theirs
 
-    with Forked(later, fork=len(candidates) > half) as beside:
-        trials = [_calibrated_pass(problem, calibration, record, spent, checks=c) for c in candidates[:half]]
+    with Forked(later, fork=len(jobs) > half) as beside:
+        results = [job(spent) for job in jobs[:half]]
         rest, theirs = beside.result()
     for part, seconds in theirs.items():
         spent[part] += seconds
-    return trials + rest
+    return results + rest
 
 
 def _record_evidence(out: TrackOutput) -> float:
