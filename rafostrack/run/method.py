@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from functools import partial
 from typing import TypeVar
 
@@ -323,7 +323,7 @@ def _trials(
     return _each_beside([partial(_calibrated_pass, problem, calibration, record, checks=c) for c in candidates], spent)
 
 
-def _each_beside(jobs: list[Callable[[dict[str, float]], T]], spent: dict[str, float]) -> list[T]:
+def _each_beside(jobs: Sequence[Callable[[dict[str, float]], T]], spent: dict[str, float]) -> list[T]:
     """job(spent) for each job, in order, the later half computed beside the earlier half
     where a core is idle (`run.forked`): each job is its own computation, the same bits.
     `spent` adds the seconds of all of them."""
