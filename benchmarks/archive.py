@@ -37,9 +37,10 @@ from rafostrack.config import load_config
 from rafostrack.domain import FloatInfo
 from rafostrack.sim.mission_writer import write_mission
 from rafostrack.sim.scenarios import dimes_scenario
-from rafostrack.sim.simulate import simulate_mission
+from rafostrack.sim.simulate import SimulatedMission, simulate_mission
 
 FLOATS_CSV = Path(__file__).resolve().parent / "data" / "dimes_all_floats.csv"
+SEED = 2026  # the simulation's default seed
 
 
 def dimes_archive_floats(n_floats: int | None = None) -> list[FloatInfo]:
@@ -69,15 +70,14 @@ def dimes_archive_floats(n_floats: int | None = None) -> list[FloatInfo]:
     ]
 
 
-def write_archive(mission: Path, n_floats: int | None, seed: int) -> tuple[list[FloatInfo], int]:
+def write_archive(mission: Path, n_floats: int | None, seed: int = SEED) -> SimulatedMission:
     """Simulate the first `n_floats` DIMES floats (all: None) into the mission directory
-    `mission`, without a rafostrack.toml (the default settings, as for a user's archive);
-    the floats and the number of windows."""
+    `mission`, without a rafostrack.toml (the default settings, as for a user's archive)."""
     floats = dimes_archive_floats(n_floats)
     simulated = simulate_mission(dimes_scenario()[0], floats, load_config().model, np.random.default_rng(seed))
     write_mission(simulated, mission)
     (mission / "rafostrack.toml").unlink()
-    return floats, sum(len(f.record.windows) for f in simulated.floats)
+    return simulated
 
 
 def _rafostrack() -> str:
@@ -107,7 +107,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--floats", type=int, default=None, help="the first K floats (default: all 140)")
     parser.add_argument("--jobs", type=int, default=default_jobs())
-    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--seed", type=int, default=SEED)
     parser.add_argument("--dask", action="store_true", help="also run on a Dask LocalCluster")
     parser.add_argument("--keep", type=Path, help="write the archive and outputs here instead of a temporary dir")
     args = parser.parse_args()
@@ -116,9 +116,11 @@ def main() -> None:
     try:
         mission = root / "archive" / "dimes"
         started = time.perf_counter()
-        floats, n_windows = write_archive(mission, args.floats, args.seed)
+        simulated = write_archive(mission, args.floats, args.seed)
+        floats = simulated.floats
+        n_windows = sum(len(f.record.windows) for f in floats)
         print(
-            f"archive: {len(floats)} DIMES floats, {len(dimes_scenario()[0])} sources, {n_windows} windows "
+            f"archive: {len(floats)} DIMES floats, {len(simulated.beacons)} sources, {n_windows} windows "
             f"({n_windows / len(floats):.0f} per float), simulated in {time.perf_counter() - started:.0f} s; "
             f"{args.jobs} job(s) on {default_jobs()} core(s)"
         )

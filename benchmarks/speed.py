@@ -3,15 +3,16 @@
 `--archive-float` also times a float as `benchmarks/archive.py` simulates the DIMES archive
 (the first of the 140 real launch/recovery pairs, the default measurement model: clutter,
 multipath and echoes; tracked with the default settings), whose cost per float is what a
-batch over an archive pays. Prints, per float, method and particle count, the time of the whole method (all its passes:
-the robust pass, calibration, the calibrated passes), split into filter, smoother (backward
-pass plus smoothed labels and summaries) and calibration (the Kalman fit and association
-EM), with the track's RMSE against the sample's truth, the labels right and the median ESS
-of the last pass; `--profile` then prints, per pass and calibration, the seconds of each
-stage of the method (motion, ranges, association, smoother, ...: `stages.py`), for finding
-what to optimise, on one kernel thread (all the work in this process: work forked beside it,
-`rafostrack.run.forked`, would escape the stages' timers). Run on one core
-(`OMP_NUM_THREADS=1 taskset -c 0`) for figures that do not depend on what else runs.
+batch over an archive pays. Prints, per float, method and particle count, the time of the
+whole method (all its passes: the robust pass, calibration, the calibrated passes), split
+into filter, smoother (backward pass plus smoothed labels and summaries) and calibration
+(the Kalman fit and association EM), with the track's RMSE against the float's truth, the
+labels right and the median ESS of the last pass; `--profile` then prints, per pass and
+calibration, the seconds of each stage of the method (motion, ranges, association,
+smoother, ...: `stages.py`), for finding what to optimise, on one kernel thread (all the
+work in this process: work forked beside it, `rafostrack.run.forked`, would escape the
+stages' timers). Run on one core (`OMP_NUM_THREADS=1 taskset -c 0`) for figures that do not
+depend on what else runs.
 
     python benchmarks/speed.py [--methods exact bp] [--particles 1000 10000] [--config FILE] [--profile]
                                [--archive-float] [--report docs/validation.md]
@@ -43,7 +44,6 @@ from rafostrack.sim.evaluate import association_accuracy, rmse_km
 from rafostrack.sim.scenarios import sample_mission_dir
 
 SAMPLE = sample_mission_dir() / "float767.csv"
-ARCHIVE_SEED = 2026  # benchmarks/archive.py's default
 
 
 def main() -> None:
@@ -60,8 +60,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="rafostrack-speed-") as tmp:
         float_files = [args.float_file]
         if args.archive_float:
-            floats, _ = write_archive(Path(tmp) / "dimes", 1, ARCHIVE_SEED)
-            float_files.append(Path(tmp) / "dimes" / f"{floats[0].float_id}.csv")
+            (archived,) = write_archive(Path(tmp) / "dimes", 1).floats
+            float_files.append(Path(tmp) / "dimes" / f"{archived.info.float_id}.csv")
         headers, rows, stages = [], [], []
         for float_file in float_files:
             header, float_rows, float_stages = _timed(float_file, args)
