@@ -126,7 +126,7 @@ def test_a_minority_contradiction_says_so_and_long_lists_are_cut():
 
 def test_what_the_floats_arrivals_would_blame_as_well_is_named_once_for_the_source():
     """Two floats contradict source B3's offset; each one's arrivals would blame as well
-    another source's offset (a scan's finding) or B3's position: the finding names every
+    another source's schedule (a scan's finding) or B3's position: the finding names every
     one of them, once, in its line and in the CSV."""
     first = {**_offset(90.0, "contradicted"), "other_sources": ["B4"], "alternatives": ["lat"]}
     second = {**_offset(91.0, "contradicted"), "other_sources": ["B7", "B4"]}
@@ -134,8 +134,9 @@ def test_what_the_floats_arrivals_would_blame_as_well_is_named_once_for_the_sour
     assert (finding.alternatives, finding.other_sources) == (("lat",), ("B4", "B7"))
     assert finding.message() == (
         "mission dimes: beacons.csv line 5: field 'offset_s' of source B3: given 120.0 s; the arrivals support "
-        "90.5 s (or its 'lat' is wrong: these arrivals cannot tell which) (or the 'offset_s' of B4 or B7 is "
-        "wrong: these arrivals cannot tell which source's) on 2 of 2 floats that hear it (f1, f2)"
+        "90.5 s (or its 'lat' is wrong: these arrivals cannot tell which) (or the schedule of B4 or B7 is "
+        "wrong, its 'offset_s', 'start' or 'end': these arrivals cannot tell which source's) on 2 of 2 floats "
+        "that hear it (f1, f2)"
     )
     assert (finding.row()["alternatives"], finding.row()["other_sources"]) == ("lat", "B4;B7")
 

@@ -261,3 +261,15 @@ def test_a_scan_finding_that_cannot_tell_two_sources_apart_names_the_fault_of_ei
     alone = {k: v for k, v in either.items() if k != "other_sources"}
     assert unnamed_faults([slot], [alone]) == [slot] and false_alarms([slot], [alone]) == [alone]
     assert false_alarms([], [either]) == [either]  # with right tables, a false alarm all the same
+
+
+def test_a_scan_finding_names_another_sources_schedule_whichever_field_is_wrong():
+    """`other_sources` name other sources whose schedule explains the arrivals as well: an
+    active period written to end early is named by another source's offset finding that
+    names its source, a drift (not a schedule value) is not."""
+    early_end = InjectedFault("source_active", "beacons.csv", "UK1-1", "end", "2010-09-14T00:00:00Z", None)
+    drift = InjectedFault("source_drift", "beacons.csv", "UK1-1", "drift_s_per_day", 0.0, 0.05)
+    either = {"file": "beacons.csv", "id": "UK1-4", "field": "offset_s", "outcome": "contradicted",
+              "other_sources": ["UK1-1"]}  # fmt: skip
+    assert unnamed_faults([early_end, drift], [either]) == [drift]
+    assert false_alarms([early_end], [either]) == [] and false_alarms([drift], [either]) == [either]

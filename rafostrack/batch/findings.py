@@ -123,7 +123,7 @@ class Check:
     tolerance: float | None = None  # the run's [checks] tolerance and z-score for the field
     z_score: float | None = None
     alternatives: tuple[str, ...] = ()  # other fields of the row the arrivals would blame as well
-    other_sources: tuple[str, ...] = ()  # other sources whose same field they would blame as well
+    other_sources: tuple[str, ...] = ()  # other sources whose schedule they would blame as well
     information: SourceInformation | None = None  # a source position's: the float's arrivals on the source
 
     @property
@@ -206,7 +206,7 @@ class Finding:
                 f"mission {self.mission}: {where}: {what}: given {given}; the arrivals of the {self.n_checked} floats "
                 f"that hear it support {pooled} together (none alone is sure)"
             )
-        unsure = undecided_note(self.field, self.alternatives, self.other_sources)
+        unsure = undecided_note(self.alternatives, self.other_sources)
         text = f"mission {self.mission}: {where}: {what}: given {given}; the arrivals support {supported}{unsure}"
         if not self.of_source:
             return text

@@ -46,6 +46,7 @@ from .kalman_problem import CLOCK, NODE, position_prior_sd, timing_prior_sd
 
 CONSISTENT, CONTRADICTED, UNDETERMINED, ESTIMATED = "consistent", "contradicted", "undetermined", "estimated"
 TRACKED_WITH_SUPPORTED = "tracked with the arrivals' value"  # how a contradiction's warning ends
+SCHEDULE_FIELDS = ("offset_s", "start", "end")  # a source's schedule in beacons.csv (`source_scan`)
 # Each checked field's tolerance: its `[checks]` setting (a fix or a position is a distance
 # from the table's, in km).
 TOLERANCE_SETTING = {
@@ -108,9 +109,9 @@ class MetadataCheck:
     # Other fields of the same row that would explain the arrivals as well (a source's
     # position, where these arrivals cannot tell it from its offset or drift).
     alternatives: tuple[str, ...] = ()
-    # Other sources (ids) whose value of the same field would explain the arrivals as well
-    # (a source scan's finding where these arrivals cannot tell which source's schedule is
-    # wrong, `run.method._scanned_schedules`).
+    # Other sources (ids) whose schedule (offset, start or end: `SCHEDULE_FIELDS`) would
+    # explain the arrivals as well (a source scan's finding where these arrivals cannot tell
+    # which source's schedule is wrong, `run.method._scanned_schedules`).
     other_sources: tuple[str, ...] = ()
     # For a source's position: what these arrivals know of the source (`SourceInformation`),
     # for a batch to pool over the floats that hear it.
@@ -150,23 +151,26 @@ class MetadataCheck:
             given = f"{_number(self.given)} {self.unit}"
             spread = "" if self.sd is None else f" (sd {_number(self.sd)} {self.unit})"
             supported = f"{_number(self.supported)} {self.unit}{spread}"
-        unsure = undecided_note(self.field, self.alternatives, self.other_sources)
+        unsure = undecided_note(self.alternatives, self.other_sources)
         return (
             f"{where}: field '{self.field}' of {self.id}: given {given}; the arrivals support {supported}{unsure}; "
             f"{self.note or TRACKED_WITH_SUPPORTED}"
         )
 
 
-def undecided_note(field: str, alternatives: Sequence[str], other_sources: Sequence[str]) -> str:
+def undecided_note(alternatives: Sequence[str], other_sources: Sequence[str]) -> str:
     """What else the arrivals would blame as well, for a contradiction's message: ` (or its
-    'lat' or 'lon' is wrong: ...)`, ` (or the 'offset_s' of B4 is wrong: ...)`; empty if nothing."""
+    'position' is wrong: ...)`, ` (or the schedule of B4 is wrong, ...: ...)`; empty if nothing."""
     note = ""
     if alternatives:
         named = " or ".join(f"'{a}'" for a in alternatives)
         note += f" (or its {named} is wrong: these arrivals cannot tell which)"
     if other_sources:
         named = " or ".join(other_sources)
-        note += f" (or the '{field}' of {named} is wrong: these arrivals cannot tell which source's)"
+        note += (
+            f" (or the schedule of {named} is wrong, its 'offset_s', 'start' or 'end': "
+            "these arrivals cannot tell which source's)"
+        )
     return note
 
 

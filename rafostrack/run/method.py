@@ -35,6 +35,7 @@ from functools import partial
 from typing import TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..calibrate import Calibration, calibrate
 from ..calibrate.launch_check import launch_check
@@ -251,8 +252,8 @@ def _scanned_schedules(
     raises the record's evidence (the filter's sum of log p(y_t | y_1..t-1) over the
     windows) by more than `[checks] z_score`^2 / 2 (the likelihood-ratio counterpart of z
     sds) makes its candidate a contender. Each contender's table is calibrated and tracked
-    again (`_refitted_pass`), and the one whose pass has the highest evidence is kept: the
-    trials share the calibration fitted to the table as given, which the wrong schedule has
+    again (`_refitted_pass`), and of several the best is kept (`_contest`): the trials
+    share the calibration fitted to the table as given, which the wrong schedule has
     pulled, and there a shift of another source can explain the signals better than the
     true fix does. Another candidate within the margin of the kept one explains the
     arrivals as well: the finding names its source too (`MetadataCheck.other_sources`: the
@@ -275,19 +276,49 @@ def _scanned_schedules(
         contenders = [int(k) for k in np.argsort(-gains, kind="stable") if gains[k] > threshold]
         jobs = [partial(_refitted_pass, problem, candidates[k], trials[k], record, calibration) for k in contenders]
         refits = _each_beside(jobs, spent)
-        scored = [(k, refit) for k, refit in zip(contenders, refits, strict=True) if refit is not None]
+        scored = {k: refit for k, refit in zip(contenders, refits, strict=True) if refit is not None}
         if not scored:
             break
-        # One contender: its trial's gain; more: the evidence of each one's refitted pass.
-        score = {k: gains[k] if len(scored) == 1 else _record_evidence(refit[2]) for k, refit in scored}
-        best, (problem, calibration, out) = max(scored, key=lambda item: score[item[0]])
-        close = [k for k in score if k != best and score[best] - score[k] <= threshold]
-        close += [k for k in range(len(gains)) if k not in score and gains[best] - gains[k] <= threshold]
+        best, close = _contest(scored, gains, threshold, record, spent)
+        problem, calibration, out = scored[best]
+        close += [k for k in range(len(gains)) if k not in scored and gains[best] - gains[k] <= threshold]
         others = tuple(candidates[k][0].id for k in sorted(close))
         checks = [dataclasses.replace(check, other_sources=others) for check in candidates[best]]
         found += checks
         done |= {check.id for check in checks} | set(others)
     return problem, out, calibration, found
+
+
+def _contest(
+    scored: dict[int, tuple[FloatProblem, Calibration, TrackOutput]],
+    gains: NDArray[np.float64],
+    margin: float,
+    record: ArrivalRecord,
+    spent: dict[str, float],
+) -> tuple[int, list[int]]:
+    """The contender kept, and those that explain the arrivals as well (within `margin`),
+    of the refitted passes `scored` (contender -> its table, calibration and pass). One
+    contender: kept. Several: each pass's evidence is one filter run's estimate, whose
+    Monte Carlo error is several nats, so each table is tracked again with another seed
+    (`[filter] seed` + 1, half of them beside); the contender of highest mean evidence over
+    the two runs is kept, and another is close to it if within `margin` of it, or better,
+    in either run. `spent` adds the seconds."""
+    if len(scored) == 1:
+        (only,) = scored
+        return only, []
+    order = list(scored)
+    again = _each_beside(
+        [partial(_calibrated_pass, _reseeded(scored[k][0]), scored[k][1], record) for k in order], spent
+    )
+    runs = {k: np.array([_record_evidence(scored[k][2]), _record_evidence(rerun)])
+            for k, rerun in zip(order, again, strict=True)}  # fmt: skip
+    best = max(order, key=lambda k: runs[k].mean())
+    return best, [k for k in order if k != best and bool(np.any(runs[best] - runs[k] <= margin))]
+
+
+def _reseeded(problem: FloatProblem) -> FloatProblem:
+    """`problem` with `[filter] seed` + 1: the same method, other random draws."""
+    return problem.with_config(with_overrides(problem.config, filter={"seed": problem.config.filter.seed + 1}))
 
 
 def _refitted_pass(

@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..calibrate.metadata_checks import SCHEDULE_FIELDS
 from ..domain import BeaconTable, FloatInfo, NaT
 from ..io.csv_table import time_text
 from ..model.geodesy import displace
@@ -321,18 +322,25 @@ def _contradicted(checks: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def names(check: dict[str, Any], fault: InjectedFault) -> bool:
     """Whether a metadata_checks entry names `fault` (same file, id and field, or a field of
-    the same row whose entry names the fault's as its alternative, or the same field of a
-    source whose entry names the fault's source among its `other_sources`; contradicted, or
-    for a value left empty, reported as estimated or undetermined with no value given)."""
+    the same row whose entry names the fault's as its alternative, or a schedule fault
+    (`SCHEDULE_FIELDS`) of a source that a schedule finding names among its
+    `other_sources`; contradicted, or for a value left empty, reported as estimated or
+    undetermined with no value given)."""
     missing = fault.written is None and check.get("given") is None
     fields = [check.get("field"), *check.get("alternatives", ())]
-    ids = [str(check.get("id")), *(str(i) for i in check.get("other_sources", ()))]
+    others = [str(i) for i in check.get("other_sources", ())]
     return (
         (check.get("outcome") == "contradicted" or (missing and check.get("outcome") in ("estimated", "undetermined")))
         and Path(str(check.get("file"))).name == fault.file
-        and fault.id in ids
-        and any(field in naming_fields(fault) for field in fields)
+        and (
+            (fault.id == str(check.get("id")) and any(field in naming_fields(fault) for field in fields))
+            or (fault.id in others and _of_schedule(naming_fields(fault)) and _of_schedule(fields))
+        )
     )
+
+
+def _of_schedule(fields: Iterable[Any]) -> bool:
+    return any(field in SCHEDULE_FIELDS for field in fields)
 
 
 def observable(fault: InjectedFault, arrivals: pd.DataFrame) -> bool:
