@@ -35,7 +35,6 @@ from functools import partial
 from typing import TypeVar
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..calibrate import Calibration, calibrate
 from ..calibrate.launch_check import launch_check
@@ -279,7 +278,7 @@ def _scanned_schedules(
         scored = {k: refit for k, refit in zip(contenders, refits, strict=True) if refit is not None}
         if not scored:
             break
-        best, close = _contest(scored, gains, threshold, record, spent)
+        best, close = _contest(scored, threshold, record, spent)
         problem, calibration, out = scored[best]
         close += [k for k in range(len(gains)) if k not in scored and gains[best] - gains[k] <= threshold]
         others = tuple(candidates[k][0].id for k in sorted(close))
@@ -291,7 +290,6 @@ def _scanned_schedules(
 
 def _contest(
     scored: dict[int, tuple[FloatProblem, Calibration, TrackOutput]],
-    gains: NDArray[np.float64],
     margin: float,
     record: ArrivalRecord,
     spent: dict[str, float],
