@@ -167,10 +167,8 @@ def undecided_note(alternatives: Sequence[str], other_sources: Sequence[str]) ->
         note += f" (or its {named} is wrong: these arrivals cannot tell which)"
     if other_sources:
         named = " or ".join(other_sources)
-        note += (
-            f" (or the schedule of {named} is wrong, its 'offset_s', 'start' or 'end': "
-            "these arrivals cannot tell which source's)"
-        )
+        fields = ", ".join(f"'{f}'" for f in SCHEDULE_FIELDS[:-1]) + f" or '{SCHEDULE_FIELDS[-1]}'"
+        note += f" (or the schedule of {named} is wrong, its {fields}: these arrivals cannot tell which source's)"
     return note
 
 
