@@ -129,8 +129,8 @@ def _timed_track(float_file: Path, particles: int) -> dict:
     digest = hashlib.sha256()
     for frame in (out.track, out.labels):
         digest.update(frame.to_csv(index=False, float_format="%.17g").encode())
-    return {"total_s": total_s, "filter_s": out.filter_s, "smoother_s": out.smoother_s,
-            "calib_s": out.calibrate_s, "outputs": digest.hexdigest()}  # fmt: skip
+    return {"total_s": total_s, "filter_s": out.seconds.filter_s, "smoother_s": out.seconds.smoother_s,
+            "calib_s": out.seconds.calibrate_s, "outputs": digest.hexdigest()}  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -284,7 +284,7 @@ def score(task: tuple[Path, Path, tuple[Path, ...], int | None]) -> tuple[dict[s
         "labels": float(labels["right"].mean()),
         "labels_oracle": oracle_labels(labelled, events, truth),
         "cover95": ours["cover95"],
-        "ess_med": float(np.median(result.output.filter_ess)),
+        "ess_med": float(np.median(result.output.counts.filter_ess)),
         "ref_rmse_km": theirs["rmse_km"],
         "ref_p95_km": theirs["p95_km"],
         "ref_cover95": theirs["cover95"],

@@ -98,10 +98,10 @@ def _timed(float_file: Path, args: argparse.Namespace) -> tuple[str, list[dict],
             elapsed = time.perf_counter() - started
             rows.append({"float": float_file.stem, **_row(method, particles, elapsed, out, truth, loaded)})
             print(
-                f"{method:>9} {particles:9d} {elapsed:8.2f} {out.filter_s:9.2f} {out.smoother_s:10.2f} "
-                f"{out.calibrate_s:8.2f} {rmse_km(out.track, truth):8.2f} "
+                f"{method:>9} {particles:9d} {elapsed:8.2f} {out.seconds.filter_s:9.2f} {out.seconds.smoother_s:10.2f} "
+                f"{out.seconds.calibrate_s:8.2f} {rmse_km(out.track, truth):8.2f} "
                 f"{association_accuracy(out.labels, loaded.record):7.2%} "
-                f"{np.median(out.filter_ess) / particles:6.2f}",
+                f"{np.median(out.counts.filter_ess) / particles:6.2f}",
                 flush=True,
             )
             if args.profile:
@@ -121,12 +121,12 @@ def _row(method: str, particles: int, elapsed_s: float, out, truth: pd.DataFrame
         "method": method,
         "particles": particles,
         "total_s": elapsed_s,
-        "filter_s": out.filter_s,
-        "smoother_s": out.smoother_s,
-        "calib_s": out.calibrate_s,
+        "filter_s": out.seconds.filter_s,
+        "smoother_s": out.seconds.smoother_s,
+        "calib_s": out.seconds.calibrate_s,
         "rmse_km": rmse_km(out.track, truth),
         "labels": association_accuracy(out.labels, loaded.record),
-        "ess/N": float(np.median(out.filter_ess) / particles),
+        "ess/N": float(np.median(out.counts.filter_ess) / particles),
     }
 
 

@@ -24,6 +24,7 @@ from typing import Any
 import pandas as pd
 
 import rafostrack.run.method as method
+import rafostrack.run.schedule_scan as schedule_scan
 from rafostrack.run.one_pass import Tracker
 
 # Stage name -> (path fragment, function names or None for all) in order: the first match wins.
@@ -100,8 +101,8 @@ class _Calls:
 
 @contextmanager
 def _recorded(profile: bool) -> Iterator[_Calls]:
-    """Wrap `Tracker.track` and the method's `calibrate` so that each call is timed (and
-    profiled when `profile`); the originals are put back on exit."""
+    """Wrap `Tracker.track` and the method's and source scan's `calibrate` so that each call
+    is timed (and profiled when `profile`); the originals are put back on exit."""
     record = _Calls()
     track, calibrate = Tracker.track, method.calibrate
 
@@ -126,12 +127,14 @@ def _recorded(profile: bool) -> Iterator[_Calls]:
         return f"pass {record.passes}"
 
     Tracker.track = wrapped(pass_name, track)  # type: ignore[method-assign]
-    method.calibrate = wrapped(lambda: "calibration", calibrate)  # type: ignore[assignment]
+    for module in (method, schedule_scan):
+        module.calibrate = wrapped(lambda: "calibration", calibrate)  # type: ignore[attr-defined]
     try:
         yield record
     finally:
         Tracker.track = track  # type: ignore[method-assign]
-        method.calibrate = calibrate  # type: ignore[assignment]
+        for module in (method, schedule_scan):
+            module.calibrate = calibrate  # type: ignore[attr-defined]
 
 
 def stage_table(run: Callable[[], Any]) -> pd.DataFrame:

@@ -39,7 +39,7 @@ import pandas as pd
 from .config import SECTIONS
 from .errors import InputError, nearest
 from .problem import FloatProblem
-from .run.one_pass import TrackOutput
+from .run.method import TrackOutput
 
 
 def _flat_keys() -> dict[str, tuple[str, str]]:

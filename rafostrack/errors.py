@@ -4,7 +4,9 @@
 wrong config key); the CLI turns it into a one-line message and exit code 2.
 `Warnings` collects recoverable oddities (a dropped duplicate row, a TOA outside its
 window) so that none of them is silent: they are printed on stderr and listed in
-`run.json`.
+`run.json`. Each warning is a `Notice`: its one line of text and the kind of problem it
+names (`WarningKind`), set where it is made, so that whoever triages floats (the mission
+overview, the batch's findings) reads the kind, never the wording.
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
 
 
 class InputError(Exception):
@@ -32,14 +36,52 @@ def nearest(name: str, choices: Iterable[str]) -> str:
     return f" (did you mean {match[0]!r}?)" if match else ""
 
 
+class WarningKind(StrEnum):
+    """What a warning is about: the overview counts warnings by kind (run.json's `warning_kinds`)."""
+
+    METADATA = "metadata"  # a table value the arrivals contradict or cannot decide
+    END_FIX = "end fix"  # the end fix far from every particle
+    GAPS = "gaps"  # windows with no usable or active beacon
+    OUTLIER_TOAS = "outlier TOAs"  # TOAs far from every particle's prediction
+    LIKELIHOOD = "likelihood"  # a window's likelihood not finite
+    CALIBRATION = "calibration"  # calibration not possible
+    ARRIVAL_FILE = "arrival file"  # an oddity of the arrival file (duplicates, TOAs outside the window)
+    MEMORY = "memory"  # a run the machine's memory may not hold
+    OTHER = "other"
+
+
+class Notice(str):
+    """One warning line with its kind (`WarningKind`), set where it is made.
+
+    A `str`: it prints, joins and is written to JSON as its text, so every place that shows
+    warnings shows them unchanged; `kind_of` reads its kind wherever it travels (pickled
+    across processes too)."""
+
+    kind: WarningKind
+
+    def __new__(cls, kind: WarningKind | str, text: str) -> Notice:
+        notice = super().__new__(cls, text)
+        notice.kind = WarningKind(kind)
+        return notice
+
+    def __getnewargs__(self) -> tuple[Any, ...]:  # type: ignore[override]
+        return (self.kind, str(self))
+
+
+def kind_of(message: str) -> WarningKind:
+    """The kind of a warning: a `Notice`'s own, `OTHER` for plain text."""
+    return message.kind if isinstance(message, Notice) else WarningKind.OTHER
+
+
 @dataclass
 class Warnings:
-    """An ordered list of recoverable input problems, each a one-line message."""
+    """An ordered list of recoverable input problems, each a one-line `Notice`."""
 
     messages: list[str] = field(default_factory=list)
 
-    def add(self, message: str) -> None:
-        self.messages.append(message)
+    def add(self, message: str, kind: WarningKind = WarningKind.ARRIVAL_FILE) -> None:
+        """Append `message` as a warning of `kind` (an input oddity unless said)."""
+        self.messages.append(message if isinstance(message, Notice) else Notice(kind, message))
 
     def __len__(self) -> int:
         return len(self.messages)

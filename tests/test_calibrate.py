@@ -10,11 +10,11 @@ import pytest
 from scipy.special import expit
 from support import truth_estimate
 
-from rafostrack.calibrate import CALIBRATED_KEYS, MIN_ARRIVALS, Calibration, calibrate
+from rafostrack.calibrate import MIN_ARRIVALS, Calibration, calibrate
 from rafostrack.calibrate.detection import MIN_OPPORTUNITIES, fit_detection
 from rafostrack.config import load_config, with_overrides
 from rafostrack.model.measurement import predicted_toa_s, window_beacons
-from rafostrack.problem import FloatProblem
+from rafostrack.problem import FloatProblem, ModelValues
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import simulate_mission
 from rafostrack.summaries.estimates import Estimate
@@ -54,13 +54,21 @@ def calibrated(first_pass) -> Calibration:
 EXPLICIT = {("model", "toa_sigma_s"), ("motion", "decorrelation_days"), ("model", "clutter_rate")}
 
 
+def _values(calibration: Calibration) -> dict[tuple[str, str], float]:
+    return dict(calibration.model.items())
+
+
 def test_every_calibrated_key_is_estimated_and_applied(first_pass, calibrated):
+    """Every model value calibration can set is estimated; the calibrated problem tracks
+    with them beside the user's configuration, which is left as it was."""
     assert calibrated is not None
-    assert set(calibrated.values) == set(CALIBRATED_KEYS)
-    applied = calibrated.apply(CONFIG)
-    for (section, key), value in calibrated.values.items():
+    assert set(_values(calibrated)) == set(ModelValues.keys())
+    problem = calibrated.calibrated(FloatProblem(first_pass[2], first_pass[3], CONFIG))
+    assert problem.config is CONFIG
+    applied = problem.tracking_config
+    for (section, key), value in _values(calibrated).items():
         assert getattr(getattr(applied, section), key) == value
-    assert abs(calibrated.values[("model", "sound_speed_m_s")] - C_TRUE) < 3.0  # 1480 configured
+    assert abs(calibrated.model.sound_speed_m_s - C_TRUE) < 3.0  # 1480 configured
     assert calibrated.report["kept_as_configured"] == []
     assert calibrated.report["arrivals_used"] == int(first_pass[0].labels["beacon_id"].notna().sum())
 
@@ -70,22 +78,22 @@ def test_explicit_keys_are_kept_not_estimated(first_pass, calibrated):
     applied and are reported as kept; the other Kalman-fitted keys are as without them."""
     kept = _calibrate(*first_pass, CONFIG, explicit=EXPLICIT)
     assert kept is not None
-    assert EXPLICIT.isdisjoint(kept.values)
-    assert set(kept.values) == set(CALIBRATED_KEYS) - EXPLICIT
-    applied = kept.apply(CONFIG)
+    assert EXPLICIT.isdisjoint(_values(kept))
+    assert set(_values(kept)) == set(ModelValues.keys()) - EXPLICIT
+    applied = kept.model.applied(CONFIG)
     for section, key in EXPLICIT:
         assert getattr(getattr(applied, section), key) == getattr(getattr(CONFIG, section), key)
         # ... and the estimate would have differed from the configured value.
-        assert calibrated.values[(section, key)] != getattr(getattr(CONFIG, section), key)
+        assert _values(calibrated)[(section, key)] != getattr(getattr(CONFIG, section), key)
     assert kept.report["kept_as_configured"] == sorted(f"[{s}] {k}" for s, k in EXPLICIT)
     for key in (("model", "sound_speed_m_s"), ("motion", "velocity_sd_km_per_day"), ("motion", "diffusion_km_per_day")):
-        assert kept.values[key] == calibrated.values[key]
+        assert _values(kept)[key] == _values(calibrated)[key]
 
 
 def test_an_explicit_sound_speed_is_the_one_the_calibrated_pass_uses(first_pass):
     estimate, record, beacons, info = first_pass
     kept = _calibrate(estimate, record, beacons, info, CONFIG, explicit={("model", "sound_speed_m_s")})
-    config = kept.apply(CONFIG)
+    config = kept.model.applied(CONFIG)
     assert config.model.sound_speed_m_s == CONFIG.model.sound_speed_m_s
     wb = window_beacons(kept.beacons, kept.info, record.windows[5].time)
     plain = window_beacons(dataclasses.replace(kept.beacons, sound_speed_m_s=None), kept.info, record.windows[5].time)

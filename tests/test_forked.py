@@ -9,6 +9,7 @@ import os
 import signal
 import sys
 import threading
+from functools import partial
 
 import numba
 import numpy as np
@@ -118,18 +119,15 @@ def test_the_backward_filter_beside_the_forward_one_gives_the_same_bits(sim_miss
     pd.testing.assert_frame_equal(beside.estimate.modes, after.estimate.modes, check_exact=True)
 
 
-def test_the_source_scan_tries_its_candidates_in_order_half_of_them_beside(spare_core, monkeypatch):
-    """Each candidate schedule's pass (here a stand-in that says where it ran), the later
-    half in the child: the passes in the candidates' order, every pass's seconds counted."""
-    from rafostrack.run import method
+def test_the_source_scan_tries_its_candidates_in_order_half_of_them_beside(spare_core):
+    """Each candidate's pass (here a stand-in that says where it ran), the later half in the
+    child: the results in the candidates' order."""
+    from rafostrack.run.schedule_scan import each_beside
 
-    def tracked(problem, calibration, record, spent, checks=None):
-        spent["filter_s"] += 1.0
-        return checks, os.getpid()
+    def tracked(candidate):
+        return candidate, os.getpid()
 
-    monkeypatch.setattr(method, "_calibrated_pass", tracked)
-    spent = {"filter_s": 0.5, "smoother_s": 0.0}
-    trials = method._trials(None, None, None, spent, [["a"], ["b"], ["c"]])
-    assert [checks for checks, _ in trials] == [["a"], ["b"], ["c"]]
+    trials = each_beside([partial(tracked, c) for c in ("a", "b", "c")])
+    assert [candidate for candidate, _ in trials] == ["a", "b", "c"]
     assert [pid == os.getpid() for _, pid in trials] == [True, True, False]
-    assert spent == {"filter_s": 3.5, "smoother_s": 0.0} and spare_core == [1]
+    assert spare_core == [1]

@@ -7,7 +7,7 @@ import pytest
 
 from rafostrack.domain import Window
 from rafostrack.legs.evidence import Grids, float_evidence
-from rafostrack.legs.floats import LegFit
+from rafostrack.legs.fit import LegFit
 from rafostrack.legs.model import LegPrior, Legs
 from rafostrack.legs.outputs import bearing_deg, float_positions, legs_frame, to_time
 from rafostrack.legs.plane import Plane

@@ -44,6 +44,7 @@ from rafostrack.model.geodesy import displace
 from rafostrack.problem import FloatProblem
 from rafostrack.run import forked
 from rafostrack.run.method import track_record
+from rafostrack.run.passes import Seconds
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import simulate_mission
 
@@ -163,26 +164,29 @@ def test_a_scanned_schedule_that_another_source_explains_as_well_names_both():
 
 @dataclasses.dataclass(frozen=True)
 class _Table:
-    """A stand-in problem for the scan's choice: the sources its table corrects."""
+    """A stand-in problem for the scan's choice: the sources its table corrects, and whether
+    a contender's own calibration (`refit`) made it."""
 
     config: object
     beacons: tuple[str, ...] = ()
-
-    def with_config(self, config):
-        return dataclasses.replace(self, config=config)
+    refit: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
 class _Pass:
     evidence: float
     estimate: object = None
+    seconds: Seconds = dataclasses.field(default_factory=Seconds)
 
 
+@dataclasses.dataclass(frozen=True)
 class _Calibration:
+    refit: bool = False
     hyper = None
+    nuisance_cov_at = None
 
     def calibrated(self, problem):
-        return problem
+        return dataclasses.replace(problem, refit=self.refit)
 
 
 @pytest.mark.parametrize(
@@ -209,38 +213,38 @@ def test_the_scan_keeps_the_contender_whose_refitted_passes_have_the_highest_evi
     (UK1-4's trial was the higher here) with the first pass, the other named with it only
     when within the margin, or better, with either seed. A third candidate that gains too
     little is not refitted."""
-    from rafostrack.run import method
+    from rafostrack.run import passes, schedule_scan
 
     trial_evidence = {"UK1-1": -4884.5, "UK1-4": -4871.1, "UK1-3": -5050.0}  # the pass as given: -5058.6
     offered = [[MetadataCheck("beacons.csv", 10, source, "offset_s", 0.0, 1.0, 1.0, "s", CONTRADICTED)]
                for source in ("UK1-1", "UK1-4", "UK1-3")]  # fmt: skip
     monkeypatch.setattr(
-        method, "schedule_candidates",
+        schedule_scan, "schedule_candidates",
         lambda problem, *_: [] if problem.beacons else [SimpleNamespace(checks=c) for c in offered],
     )  # fmt: skip
-    monkeypatch.setattr(method, "with_supported_schedule", lambda beacons, checks: (*beacons, checks[0].id))
+    for module in (passes, schedule_scan):
+        monkeypatch.setattr(module, "with_supported_schedule", lambda beacons, checks: (*beacons, checks[0].id))
     refitted = []
     monkeypatch.setattr(
-        method, "calibrate", lambda estimate, record, tried, start: refitted.append(tried) or _Calibration()
+        schedule_scan,
+        "calibrate",
+        lambda estimate, record, tried, start: refitted.append(tried) or _Calibration(refit=True),
     )
     monkeypatch.setattr(forked, "threads_beside", lambda: None)  # all here, where `refitted` sees it
 
-    def tracked(problem, calibration, record, spent, checks=None):
-        if checks is not None:
-            return _Pass(trial_evidence[checks[0].id])
-        reseeded = problem.config.filter.seed == CONFIG.filter.seed + 1
-        return _Pass((again if reseeded else refit_evidence)[problem.beacons[-1]])
+    def tracked(spec, record, progress=None):
+        source = spec.problem.beacons[-1]
+        if not spec.problem.refit:
+            return _Pass(trial_evidence[source])
+        return _Pass((again if spec.seed == CONFIG.filter.seed + 1 else refit_evidence)[source])
 
-    monkeypatch.setattr(method, "_calibrated_pass", tracked)
-    monkeypatch.setattr(method, "_record_evidence", lambda out: out.evidence)
+    monkeypatch.setattr(schedule_scan, "run_pass", tracked)
     table = _Table(CONFIG)
-    problem, out, _, found = method._scanned_schedules(
-        table, None, _Calibration(), _Pass(-5058.6), {"calibrate_s": 0.0}
-    )
+    found = schedule_scan.scanned_schedules(table, None, _Calibration(), _Pass(-5058.6))
     assert [t.beacons for t in refitted] == [("UK1-4",), ("UK1-1",)]
-    assert problem.beacons == (kept,) and out.evidence == refit_evidence[kept]
-    assert problem.config == CONFIG  # the pass gone on with is the configured seed's
-    assert [(c.id, c.other_sources) for c in found] == [(kept, others)]
+    assert found.problem.beacons == (kept,) and found.result.evidence == refit_evidence[kept]
+    assert found.problem.config == CONFIG  # the pass gone on with is the configured seed's
+    assert [(c.id, c.other_sources) for c in found.findings] == [(kept, others)]
 
 
 @pytest.fixture(scope="module")
@@ -307,9 +311,8 @@ def test_a_window_too_long_is_named_and_the_track_uses_the_arrivals_one(cluttere
     assert check.outcome == CONTRADICTED and check.supported == check.used == np.ceil(latest)
     assert info.window_s - 60.0 < check.supported <= info.window_s
     assert calibration.info.window_s == check.supported
-    rate = ("model", "clutter_rate")
-    per_second = calibration.values[rate] / calibration.info.window_s
-    assert per_second == pytest.approx(right.values[rate] / info.window_s, rel=0.05)
+    per_second = calibration.model.clutter_rate / calibration.info.window_s
+    assert per_second == pytest.approx(right.model.clutter_rate / info.window_s, rel=0.05)
     (warning,) = warnings_of(calibration.checks)
     assert warning == (
         f"floats.csv: line 2: field 'window_s' of {info.float_id}: given {1.4 * info.window_s:.4g} s; "

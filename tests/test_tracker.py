@@ -122,8 +122,9 @@ def test_smoothing_keeps_each_step_on_at_most_the_points_the_smoother_reads(sim_
     config = with_overrides(
         load_config(), filter={"particles": MAX_COLUMNS + 500, "seed": 1}, smoother={"two_filter": two_filter}
     )
+    tracker = Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, config))
     tracker = dataclasses.replace(
-        Tracker.from_problem(FloatProblem(sim_mission.beacons, sim.info, config)), ffbsm_columns=ffbsm_columns
+        tracker, smoothing=dataclasses.replace(tracker.smoothing, ffbsm_columns=ffbsm_columns)
     )
     columns = JOIN_COLUMNS if two_filter else ffbsm_columns
     kept = tracker._run_kept(record, columns)
@@ -184,7 +185,7 @@ def test_the_smoothed_tracks_ess_is_the_filters(sim_mission, two_filter):
     )
     out = track_record(FloatProblem(sim_mission.beacons, sim.info, config), sim.record)
     assert out.estimate.kind == "smoothed"
-    np.testing.assert_array_equal(out.track["ess"].to_numpy(), np.array(out.filter_ess))
+    np.testing.assert_array_equal(out.track["ess"].to_numpy(), np.array(out.counts.filter_ess))
 
 
 def test_tables_without_rows_keep_their_column_types(sim_mission, tmp_path):

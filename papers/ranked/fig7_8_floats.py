@@ -23,9 +23,8 @@ import pandas as pd
 from rafostrack.config import method_overrides, with_overrides
 from rafostrack.domain import ArrivalRecord
 from rafostrack.plots import date_axis, save_png
-from rafostrack.run.method import track_record
+from rafostrack.run.method import TrackOutput, track_record
 from rafostrack.run.one_float import TrackInputs, load_float
-from rafostrack.run.one_pass import TrackOutput
 from rafostrack.sim.evaluate import association_accuracy, position_errors_km
 
 from ..common import DEFAULT_WORKERS, experiment, figure, pmap, save_csv
@@ -160,8 +159,8 @@ def _float_summary(
         },
         "rmse_ours_vs_labeled_km": float(np.sqrt(np.mean(ours_vs_labeled**2))),
         "seconds": {
-            "exact": round(ours.filter_s + ours.smoother_s, 1),
-            "labeled": round(lab.filter_s + lab.smoother_s, 1),
+            "exact": round(ours.seconds.filter_s + ours.seconds.smoother_s, 1),
+            "labeled": round(lab.seconds.filter_s + lab.seconds.smoother_s, 1),
         },
     }
 

@@ -26,8 +26,7 @@ from rafostrack.config import Config, load_config, method_overrides, with_overri
 from rafostrack.domain import ArrivalRecord, BeaconTable, FloatInfo
 from rafostrack.model.geodesy import displace, local_offsets_km
 from rafostrack.problem import FloatProblem
-from rafostrack.run.method import track_record
-from rafostrack.run.one_pass import TrackOutput
+from rafostrack.run.method import TrackOutput, track_record
 from rafostrack.sim.evaluate import position_errors_km
 from rafostrack.sim.scenarios import sample_mission_dir
 from rafostrack.sim.simulate import simulate_arrivals
@@ -283,7 +282,7 @@ def run_method(
     assert out.filtered is not None  # asked for with also_filtered
     err_f = position_errors_km(out.filtered.track, scenario.truth) ** 2 / unit2
     err_s = position_errors_km(out.estimate.track, scenario.truth) ** 2 / unit2 if smooth else err_f
-    return MethodRun(method, out, err_f, err_s, out.filter_s + out.smoother_s)
+    return MethodRun(method, out, err_f, err_s, out.seconds.filter_s + out.seconds.smoother_s)
 
 
 def method_task(task: tuple[Scenario, ArrivalRecord, Config, str]) -> MethodRun:

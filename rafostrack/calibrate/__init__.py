@@ -17,7 +17,8 @@ tracking pass with robust settings gives positions and labels; from its confiden
 - `detection.fit_detection`: each beacon's peak detection probability and half range;
 - `window_check`: the listening window's length against the latest TOAs and the clutter.
 
-The second pass tracks with these values (`Calibration.apply`). A value the user set in a
+The next pass tracks with these values (`Calibration.calibrated`: typed `ModelValues`
+beside the user's configuration, which is never rewritten). A value the user set in a
 config file or flag is kept as set, not estimated; every estimate is reported in run.json.
 """
 
@@ -31,10 +32,10 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from ..config import Config, with_overrides
+from ..config import Config
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo
 from ..model import measurement as m
-from ..problem import FloatProblem
+from ..problem import FloatProblem, ModelValues
 from ..summaries.estimates import Estimate
 from . import kalman
 from .association import fit_association
@@ -58,45 +59,14 @@ INITIAL_CLOCK_RATE_SD_S_PER_DAY = 0.01
 MAX_RELEASES = 4  # table values released at most per calibration (`_checked_fit`)
 RELEASE_TRIALS = 3  # contradicted values tried per release
 
-# The config keys calibration may set, (section, key).
-CALIBRATED_KEYS = (
-    ("model", "sound_speed_m_s"),
-    ("model", "toa_sigma_s"),
-    ("model", "multipath_fraction"),
-    ("model", "multipath_delay_s"),
-    ("model", "clutter_rate"),
-    ("model", "echo_fraction"),
-    ("motion", "mean_current_east_km_per_day"),
-    ("motion", "mean_current_north_km_per_day"),
-    ("motion", "velocity_sd_km_per_day"),
-    ("motion", "decorrelation_days"),
-    ("motion", "diffusion_km_per_day"),
-)
-
-# Decimal places each calibrated value is rounded to (`_quantised`) before it is reported in
-# run.json and before the next pass tracks with it: the values run.json shows, given back as
-# configuration, then reproduce the calibrated track exactly.
-DECIMALS: dict[tuple[str, str], int] = {
-    ("model", "sound_speed_m_s"): 2,
-    ("model", "toa_sigma_s"): 3,
-    ("model", "multipath_fraction"): 4,
-    ("model", "multipath_delay_s"): 2,
-    ("model", "clutter_rate"): 3,
-    ("model", "echo_fraction"): 4,
-    ("motion", "mean_current_east_km_per_day"): 3,
-    ("motion", "mean_current_north_km_per_day"): 3,
-    ("motion", "velocity_sd_km_per_day"): 3,
-    ("motion", "decorrelation_days"): 2,
-    ("motion", "diffusion_km_per_day"): 3,
-}
-
 
 @dataclass(frozen=True)
 class Calibration:
-    """Estimated values: config keys, the beacon table and float with their corrections, and
-    the position covariance the nuisances leave undetermined at each node time."""
+    """Estimated values: the model's (`ModelValues`, typed, beside the user's configuration),
+    the beacon table and float with their corrections, and the position covariance the
+    nuisances leave undetermined at each node time."""
 
-    values: dict[tuple[str, str], float]
+    model: ModelValues
     beacons: BeaconTable
     info: FloatInfo
     report: dict[str, Any] = field(default_factory=dict)
@@ -105,13 +75,10 @@ class Calibration:
     hyper: kalman.Hyper | None = None  # the Kalman smoother's fitted hyperparameters
     checks: tuple[MetadataCheck, ...] = ()  # the table values against the arrivals (`metadata_checks`)
 
-    def apply(self, config: Config) -> Config:
-        """`config` with the estimated keys set."""
-        return _with_values(config, self.values)
-
     def calibrated(self, problem: FloatProblem) -> FloatProblem:
-        """`problem` as calibrated: the corrected beacon table and float, the estimated keys set."""
-        return FloatProblem(self.beacons, self.info, self.apply(problem.config))
+        """`problem` as calibrated: the corrected beacon table and float, tracked with the
+        estimated model values beside its (the user's) configuration."""
+        return FloatProblem(self.beacons, self.info, problem.config, self.model)
 
     def nuisance_cov_at(self, times: NDArray[np.datetime64]) -> NDArray[np.float64]:
         """(n, 2, 2) nuisance covariance at `times`, from the nearest node."""
@@ -123,15 +90,6 @@ class Calibration:
         left = np.maximum(right - 1, 0)
         nearest = np.where(np.abs(nodes[left] - t) <= np.abs(nodes[right] - t), left, right)
         return self.nuisance_cov_km2[nearest]
-
-
-def _with_values(config: Config, values: dict[tuple[str, str], float]) -> Config:
-    """`config` with the estimated values that the user did not set (`Config.explicit`)."""
-    layer: dict[str, dict[str, Any]] = {}
-    for (section, key), value in values.items():
-        if (section, key) not in config.explicit:
-            layer.setdefault(section, {})[key] = value
-    return with_overrides(config, **layer) if layer else config
 
 
 def _detection(
@@ -234,12 +192,12 @@ def calibrate(
     checks: list[MetadataCheck] = []
     if problem.config.checks.enabled:
         timing, checks = _checked_fit(built, timing, problem)
-    fit = timing.fit
-    values = _quantised(_timing_values(fit))
+    fit, explicit = timing.fit, problem.config.explicit
+    timed_values = ModelValues.rounded(_timing_values(fit), explicit)
     corrected = corrected_beacons(problem.beacons, timing.heard, fit, _speeds_fitted(problem.config))
     clocked = dataclasses.replace(problem.info, clock_residual=(timing.problem.time, fit.clock_s))
     clocked = with_supported_fixes(clocked, checks)
-    timed = _with_values(problem.config, values).model
+    timed = timed_values.applied(problem.config).model
     detection = _fit_detection(estimate, record, problem, corrected, clocked, timed)
     associated, association_report = _fit_noise(record, timing, detection.beacons, clocked, timed)
     if problem.config.checks.enabled:
@@ -247,11 +205,10 @@ def calibrate(
         clocked, clutter_rate = with_supported_window(clocked, associated.clutter_rate, window, record)
         associated = dataclasses.replace(associated, clutter_rate=clutter_rate)
         checks.append(window)
-    values |= _quantised(_association_values(associated))
-    values = {k: v for k, v in values.items() if k not in problem.config.explicit}
-    report = _report(timing, values, problem, detection, association_report)
+    model = timed_values.merged(ModelValues.rounded(_association_values(associated), explicit))
+    report = _report(timing, model, problem, detection, association_report)
     return Calibration(
-        values, detection.beacons, clocked, report, timing.problem.time, fit.nuisance_cov_km2, fit.hyper, tuple(checks)
+        model, detection.beacons, clocked, report, timing.problem.time, fit.nuisance_cov_km2, fit.hyper, tuple(checks)
     )
 
 
@@ -322,36 +279,29 @@ def _checked_fit(
     return timing, [used(c) for c in checks]
 
 
-def _timing_values(fit: kalman.KalmanFit) -> dict[tuple[str, str], float]:
-    """The config keys the timing fit estimates, at the fit's precision."""
+def _timing_values(fit: kalman.KalmanFit) -> dict[str, float]:
+    """The model values the timing fit estimates (`ModelValues` keys), at the fit's precision."""
     hyper = fit.hyper
     return {
-        ("model", "sound_speed_m_s"): fit.sound_speed_m_s,
-        ("model", "toa_sigma_s"): hyper.toa_sigma_s,
-        ("motion", "mean_current_east_km_per_day"): float(fit.mean_current_km_per_day[0]),
-        ("motion", "mean_current_north_km_per_day"): float(fit.mean_current_km_per_day[1]),
-        ("motion", "velocity_sd_km_per_day"): hyper.velocity_sd_km_per_day,
-        ("motion", "decorrelation_days"): hyper.decorrelation_days,
+        "sound_speed_m_s": fit.sound_speed_m_s,
+        "toa_sigma_s": hyper.toa_sigma_s,
+        "mean_current_east_km_per_day": float(fit.mean_current_km_per_day[0]),
+        "mean_current_north_km_per_day": float(fit.mean_current_km_per_day[1]),
+        "velocity_sd_km_per_day": hyper.velocity_sd_km_per_day,
+        "decorrelation_days": hyper.decorrelation_days,
         # The random walk with the same long-time spread: D^2 = 2 sigma_v^2 T per axis per day.
-        ("motion", "diffusion_km_per_day"): hyper.velocity_sd_km_per_day * float(np.sqrt(2 * hyper.decorrelation_days)),
+        "diffusion_km_per_day": hyper.velocity_sd_km_per_day * float(np.sqrt(2 * hyper.decorrelation_days)),
     }
 
 
-def _association_values(associated: m.ModelConfig) -> dict[tuple[str, str], float]:
-    """The config keys the association fit estimates, at the fit's precision."""
+def _association_values(associated: m.ModelConfig) -> dict[str, float]:
+    """The model values the association fit estimates (`ModelValues` keys), at the fit's precision."""
     return {
-        ("model", "multipath_fraction"): associated.multipath_fraction,
-        ("model", "multipath_delay_s"): associated.multipath_delay_s,
-        ("model", "echo_fraction"): associated.echo_fraction,
-        ("model", "clutter_rate"): associated.clutter_rate,
+        "multipath_fraction": associated.multipath_fraction,
+        "multipath_delay_s": associated.multipath_delay_s,
+        "echo_fraction": associated.echo_fraction,
+        "clutter_rate": associated.clutter_rate,
     }
-
-
-def _quantised(values: dict[tuple[str, str], float]) -> dict[tuple[str, str], float]:
-    """Stage 2: each value rounded to its `DECIMALS`, as run.json reports it and the next
-    pass tracks with it (so that run.json's values, given as configuration, reproduce the
-    track exactly)."""
-    return {key: round(value, DECIMALS[key]) for key, value in values.items()}
 
 
 def _fit_detection(
@@ -387,7 +337,7 @@ def _fit_noise(
 
 def _report(
     timing: _TimingFit,
-    values: dict[tuple[str, str], float],
+    model: ModelValues,
     problem: FloatProblem,
     detection: _DetectionFit,
     association_report: dict[str, Any],
@@ -404,8 +354,8 @@ def _report(
         "clock_rate_sd_s_per_day": round(fit.hyper.clock_rate_sd_s_per_day, 5),
         "association": association_report,
         "log_evidence": round(fit.log_evidence, 2),
-        "values": {f"[{s}] {k}": v for (s, k), v in values.items()},
-        "kept_as_configured": sorted(f"[{s}] {k}" for s, k in explicit if (s, k) in CALIBRATED_KEYS),
+        "values": {f"[{s}] {k}": v for (s, k), v in model.items()},
+        "kept_as_configured": sorted(f"[{s}] {k}" for s, k in explicit if (s, k) in ModelValues.keys()),
         "beacons": _beacon_report(timing, problem.beacons, detection.report),
         "clock_residual_s": {"max_abs": round(float(np.abs(fit.clock_s).max()), 3), "nodes": len(fit.clock_s)},
         "nuisance_sd_km": {

@@ -28,7 +28,7 @@ from its misses alone), with the candidate's schedule against the calibration's,
 and only candidates gaining more than `MIN_GAIN_NATS` are returned, strongest first. A
 chance pile gains where it hits and loses wherever the moved source is due and not heard.
 The gain holds the track fixed, and a track pulled by one wrong source makes others look
-shifted: the method (`run.method._scanned_schedules`) therefore tracks the record again
+shifted: the method (`run.schedule_scan.scanned_schedules`) therefore tracks the record again
 with the strongest candidates and keeps one only where the whole record's evidence rises.
 """
 
@@ -152,7 +152,7 @@ def schedule_candidates(
     corrections and each source's fitted detection, its clock and model); the checks name
     the values of `table` (the user's). Those gaining more than `MIN_GAIN_NATS`, strongest
     first."""
-    beacons, config = calibrated.beacons, calibrated.config
+    beacons, config = calibrated.beacons, calibrated.tracking_config
     window_s = calibrated.info.window_s
     found = []
     for row, res in enumerate(_residuals(record, estimate.track, beacons, calibrated.info, config.model)):
@@ -184,7 +184,7 @@ def schedule_candidates(
 def _record_loglik(problem: FloatProblem, estimate: Estimate, record: ArrivalRecord) -> float:
     """The record's log-likelihood at the track's positions under `problem` (the ranked model)."""
     likelihood = arrivals_from_config(
-        problem.beacons, problem.info, with_overrides(problem.config, filter={"likelihood": "ranked"})
+        problem.beacons, problem.info, with_overrides(problem.tracking_config, filter={"likelihood": "ranked"})
     )
     at = estimate.track.set_index("time")
     windows = [w for w in record.windows if w.time in at.index]

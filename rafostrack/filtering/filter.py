@@ -23,13 +23,14 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import FilterConfig
 from ..domain import Cloud, Particles, PositionFix, Window, days_between
 from ..likelihoods import ArrivalLikelihood, Evidence, Likelihood, MoveFactor
 from ..motion import MotionModel
 from .guided import Guide
 from .modes import mode_labels
 from .recovery import RecoveryMonitor, RecoverySettings
-from .resampling import Resampler, ess, normalise_log_weights, resample_within, within_mode_ess
+from .resampling import RESAMPLERS, Resampler, ess, normalise_log_weights, resample_within, within_mode_ess
 
 Observation = Window | PositionFix
 
@@ -95,9 +96,21 @@ class FilterSettings:
     particles: int
     resample_ess_fraction: float
     resampler: Resampler
-    mode_link_km: float = 15.0
-    max_modes: int = 8
-    min_mode_mass: float = 1e-4
+    mode_link_km: float
+    max_modes: int
+    min_mode_mass: float
+
+    @classmethod
+    def from_config(cls, config: FilterConfig) -> FilterSettings:
+        """`[filter]`'s settings of the cloud (their defaults in default.toml)."""
+        return cls(
+            config.particles,
+            config.resample_ess_fraction,
+            RESAMPLERS[config.resampling],
+            config.mode_link_km,
+            config.max_modes,
+            config.min_mode_mass,
+        )
 
     def resample(self, particles: Particles, weights: NDArray, rng: np.random.Generator) -> Resampled:
         """Resample within modes when their summed ESS is below `resample_ess_fraction` x N:

@@ -30,16 +30,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import Config
-from ..domain import Window, elapsed_days
+from ..domain import elapsed_days
 from ..errors import InputError
 from ..likelihoods import arrivals_from_config
-from ..run.method import track_record
+from ..run.method import TrackOutput, track_record
 from ..run.one_float import LoadedFloat, TrackInputs, load_float
-from ..run.one_pass import TrackOutput
 from .evidence import FloatEvidence, build_grids, float_evidence
+from .fit import LegFit
 from .model import LegPrior, Legs, log_prior
+from .outputs import write_outputs
 from .plane import Plane
-from .sampler import Chain, SamplerConfig, run_chain
+from .sampler import SamplerConfig, run_chain
 from .scores import Measurements
 from .theta0 import data_driven_start
 from .trajectory import positions
@@ -56,23 +57,6 @@ def wiggle_levels(max_km: float) -> tuple[float, ...]:
 
 
 THETA0_GUESSES = 16
-
-
-@dataclass(frozen=True)
-class LegFit:
-    """A float's leg posterior and what it was fitted to (times in days since `epoch`)."""
-
-    float_id: str
-    epoch: np.datetime64
-    plane: Plane
-    windows: tuple[Window, ...]
-    window_days: NDArray[np.float64]
-    evidence: FloatEvidence
-    chain: Chain
-    start: Legs
-    prior: LegPrior
-    smoother: TrackOutput
-    timings: dict[str, float]
 
 
 def leg_prior(config: Config) -> LegPrior:
@@ -115,8 +99,8 @@ def fit_legs(
     times = np.array([w.time for w in record.windows], dtype="datetime64[ns]")
     window_days = elapsed_days(times, epoch)
     centres = plane.to_plane(track["lat"].to_numpy(), track["lon"].to_numpy())
-    tracked = output.problem or loaded.problem
-    cfg = tracked.config
+    tracked = output.problem
+    cfg = tracked.tracking_config  # the user's configuration with the calibrated model values
     likelihood = arrivals_from_config(tracked.beacons, tracked.info, cfg)
     grids = build_grids(likelihood, list(record.windows), centres, plane, config.legs.grid_spacing_km,
                         config.legs.grid_half_width_km)  # fmt: skip
@@ -184,8 +168,6 @@ class LegsResult:
 
 def legs_float(inputs: TrackInputs, out_root: Path, *, plots: bool = True) -> LegsResult:
     """Track the float with the smoother, fit legs, write the outputs (module docstring)."""
-    from .outputs import write_outputs
-
     started = time.perf_counter()
     loaded = load_float(inputs)
     config, float_id = loaded.problem.config, loaded.problem.info.float_id

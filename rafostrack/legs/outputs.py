@@ -25,7 +25,7 @@ from ..io.writers import file_digest, write_json, write_parquet
 from ..run.one_float import LoadedFloat, TrackInputs
 from ..summaries.estimates import TRACK_COLUMNS
 from .evidence import grid_loglik, window_positions
-from .floats import LegFit
+from .fit import LegFit
 from .summaries import leg_table, position_samples, sample_ess
 from .trajectory import positions, velocities
 

@@ -11,7 +11,7 @@ import errno
 import re
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,14 +21,13 @@ import numpy as np
 from .. import __version__
 from ..config import Config, load_config
 from ..domain import ArrivalRecord, FloatInfo
-from ..errors import InputError, Warnings, nearest
+from ..errors import InputError, Notice, WarningKind, Warnings, kind_of, nearest
 from ..io import float_id_of, read_arrivals, read_beacons, read_floats
 from ..io.outdir import check_output_dir, remove_stale_siblings, staging_dir, swap_into_place
 from ..io.output_formats import write_estimate
 from ..io.writers import file_digest, write_json
 from ..problem import FloatProblem
-from .method import track_record
-from .one_pass import TrackOutput
+from .method import TrackOutput, track_record
 from .progress import NoProgress, Progress
 from .resources import available_bytes, memory_warning
 
@@ -203,12 +202,13 @@ def track_float(
         notice(too_big)
     progress.phase("tracking")
     output = track_record(loaded.problem, loaded.record, also_filtered=also_filtered, progress=progress.step)
-    if too_big is not None:
-        output = dataclasses.replace(output, warnings=[too_big, *output.warnings])
     track_s = time.perf_counter() - started
     staging = staging_dir(final)
-    stale = [f"removed {path} (left by an interrupted run)" for path in remove_stale_siblings(final)]
-    output = dataclasses.replace(output, warnings=[*output.warnings, *stale])
+    stale = [
+        Notice(WarningKind.OTHER, f"removed {path} (left by an interrupted run)")
+        for path in remove_stale_siblings(final)
+    ]
+    warnings = [*([too_big] if too_big is not None else []), *output.warnings, *stale]
     try:
         if staging.exists():
             shutil.rmtree(staging)
@@ -216,7 +216,7 @@ def track_float(
         _write_outputs(
             staging, loaded.problem, output, progress, plots=plots, also_filtered=also_filtered, formats=formats
         )
-        run = run_record(inputs, loaded, output, time.perf_counter() - started)
+        run = run_record(inputs, loaded, output, time.perf_counter() - started, warnings)
         run["track_s"] = round(track_s, 3)
         write_json(staging / "run.json", run)
         swap_into_place(staging, final)
@@ -285,8 +285,17 @@ def write_tables(
     return written
 
 
-def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, elapsed_s: float) -> dict[str, Any]:
-    """The `run.json` payload: version, inputs with digests, config, method, runtime, counts."""
+def run_record(
+    inputs: TrackInputs,
+    loaded: LoadedFloat,
+    output: TrackOutput,
+    elapsed_s: float,
+    warnings: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """The `run.json` payload: version, inputs with digests, config, method, runtime, counts;
+    the warnings of reading the inputs, then `warnings` (by default the method's), each
+    with its kind (`warning_kinds`, in the same order)."""
+    warned = [*loaded.warnings.messages, *(output.warnings if warnings is None else warnings)]
     files = {"float_file": inputs.float_path, "beacons": inputs.resolved_beacons()}
     floats_path = inputs.resolved_floats()
     if floats_path is not None:
@@ -305,25 +314,26 @@ def run_record(inputs: TrackInputs, loaded: LoadedFloat, output: TrackOutput, el
         "config_files": [str(p) for p in inputs.config_layers()],
         "config": config.to_dict(),
         "runtime_s": round(elapsed_s, 3),
-        "filter_s": round(output.filter_s, 3),
-        "smoother_s": round(output.smoother_s, 3),
-        "calibrate_s": round(output.calibrate_s, 3),
+        "filter_s": round(output.seconds.filter_s, 3),
+        "smoother_s": round(output.seconds.smoother_s, 3),
+        "calibrate_s": round(output.seconds.calibrate_s, 3),
         "calibration": output.calibration,
         "metadata_checks": list(output.metadata_checks),
-        "ess": _ess_summary(np.array(output.filter_ess), config.filter.particles),
+        "ess": _ess_summary(np.array(output.counts.filter_ess), config.filter.particles),
         "counts": {
             "windows": len(output.track),
             "toas": len(labels),
             "labelled_beacon": int(labels["beacon_id"].notna().sum()),
             "labelled_clutter": int(labels["beacon_id"].isna().sum()),
-            "resamples": output.n_resamples,
-            "recovery_checks": output.n_checks,
-            "recovery_reseeds": output.n_reseeds,
+            "resamples": output.counts.n_resamples,
+            "recovery_checks": output.counts.n_checks,
+            "recovery_reseeds": output.counts.n_reseeds,
             "ambiguous_windows": int(output.track["ambiguous"].sum()),
             "status": {k: int(v) for k, v in output.track["status"].value_counts().sort_index().items()},
-            "warnings": len(loaded.warnings) + len(output.warnings),
+            "warnings": len(warned),
         },
-        "warnings": [*loaded.warnings.messages, *output.warnings],
+        "warnings": warned,
+        "warning_kinds": [kind_of(message) for message in warned],
     }
 
 

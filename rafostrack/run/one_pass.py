@@ -1,10 +1,11 @@
-"""The method assembled from its components: filter, smooth (unless disabled), summarise.
+"""One pass assembled from its components: filter, smooth (unless disabled), summarise.
 
-`Tracker.from_problem` picks each component from its registry (motion model, arrival
-likelihood and its engine, resampling scheme) for one float's problem; `Tracker.track`
-runs the float's record in memory, with no file I/O. `run.method.track_record` runs its passes
-and `one_float` reads inputs and writes outputs around them; tests, benchmarks and papers
-call it directly.
+`Tracker.for_pass` picks each component from its registry (motion model, arrival
+likelihood and its engine, resampling scheme) for one pass (`run.passes.PassSpec`);
+`Tracker.from_problem` for the pass the user configured. `Tracker.track` runs the float's
+record in memory, with no file I/O, and gives a `PassResult`; `run_pass` does both.
+`run.method.track_record` runs the method's passes and `one_float` reads inputs and writes
+outputs around them; tests, benchmarks and papers call them directly.
 """
 
 from __future__ import annotations
@@ -13,10 +14,8 @@ import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
-import pandas as pd
 from numpy.typing import NDArray
 
 from ..config import AmbiguityConfig, Config
@@ -25,7 +24,6 @@ from ..domain import ArrivalRecord, Cloud, FloatInfo, Particles, PositionFix
 from ..filtering.filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
 from ..filtering.guided import Guide
 from ..filtering.recovery import RecoverySettings
-from ..filtering.resampling import RESAMPLERS
 from ..likelihoods import (
     ArrivalLikelihood,
     MoveFactor,
@@ -34,41 +32,11 @@ from ..likelihoods import (
 )
 from ..motion import ClockWalk, JumpMixture, MotionModel, motion_from_config
 from ..problem import FloatProblem
-from ..smoothing.ffbsm import MAX_COLUMNS, Smoothed, column_points, smooth
+from ..smoothing.ffbsm import Smoothed, column_points, smooth
 from ..smoothing.two_filter import JOIN_COLUMNS, forward_view, two_filter_smooth
 from ..summaries.estimates import Estimate, EstimateBuilder, Regions
 from .forked import Forked
-
-
-@dataclass(frozen=True)
-class TrackOutput:
-    estimate: Estimate  # smoothed when the smoother is enabled, else filtered
-    filtered: Estimate | None  # the filtered estimate, when asked for (or when it is the estimate)
-    n_resamples: int
-    warnings: list[str]  # recoverable problems met while filtering
-    filter_s: float
-    smoother_s: float
-    calibration: dict[str, Any] | None = None  # what the first pass estimated (`rafostrack.calibrate`)
-    calibrate_s: float = 0.0  # the first pass and the estimation
-    filter_ess: tuple[float, ...] = ()  # the filter's effective sample size at each window
-    n_checks: int = 0  # windows the recovery monitor searched
-    n_reseeds: int = 0  # windows where it re-seeded part of the cloud
-    # The problem the final pass tracked (after calibration: corrected timing, clock
-    # residual, fitted model), for whoever reuses its model (e.g. `rafostrack.legs`); set by
-    # `run.method.track_record`.
-    problem: FloatProblem | None = None
-    smoother: str = "none"  # which smoother made the estimate: "ffbsm", "two_filter" or "none"
-    # The table values weighed against the arrivals (`calibrate.metadata_checks`), as run.json
-    # lists them; set by `run.method.track_record`.
-    metadata_checks: tuple[dict[str, Any], ...] = ()
-
-    @property
-    def track(self) -> pd.DataFrame:
-        return self.estimate.track
-
-    @property
-    def labels(self) -> pd.DataFrame:
-        return self.estimate.labels
+from .passes import FilterCounts, NuisanceCov, PassResult, PassSpec, Seconds, Smoothing
 
 
 def _motion(config: Config) -> MotionModel:
@@ -100,45 +68,43 @@ class Tracker:
     settings: FilterSettings
     launch_sd_km: float
     end_fix: PositionFix | None
-    smooth: bool
+    smoothing: Smoothing
     ambiguity: AmbiguityConfig
     seed: int
     recovery: RecoverySettings | None = None
     factors: tuple[MoveFactor, ...] = ()
     guide: Guide | None = None  # part of each window's cloud drawn guided by it (`rafostrack.filtering.guided`)
-    two_filter: bool = False  # smooth by joining a backward filter (`rafostrack.smoothing.two_filter`)
-    backward_particles: int = 0  # that backward filter's particles at most (0: the forward filter's)
-    ffbsm_columns: int = MAX_COLUMNS  # FFBSm: quantile points of each step's cloud (`ffbsm.smooth`)
 
     @classmethod
-    def from_problem(cls, problem: FloatProblem) -> Tracker:
-        """The configured tracker of one float's problem."""
-        beacons, info, config = problem.beacons, problem.info, problem.config
+    def for_pass(cls, spec: PassSpec) -> Tracker:
+        """The tracker of one pass: its problem's beacons and float, the components its
+        configuration asks for (with the pass's model values, seed and particles), its
+        smoothing, and the float clock's walk in the state when the pass asks for one."""
+        beacons, info, config = spec.problem.beacons, spec.problem.info, spec.tracking_config()
         use_end = config.fixes.use_end_fix and info.has_end_fix
+        motion = _motion(config)
+        if spec.clock_walk_s_per_sqrt_day > 0:
+            motion = ClockWalk(motion, spec.clock_walk_s_per_sqrt_day, config.fixes.clock_offset_sd_s)
         return cls(
             info=info,
             beacon_ids=beacons.beacon_id,
-            motion=_motion(config),
+            motion=motion,
             arrivals=arrivals_from_config(beacons, info, config),
-            settings=FilterSettings(
-                config.filter.particles,
-                config.filter.resample_ess_fraction,
-                RESAMPLERS[config.filter.resampling],
-                config.filter.mode_link_km,
-                config.filter.max_modes,
-                config.filter.min_mode_mass,
-            ),
+            settings=FilterSettings.from_config(config.filter),
             launch_sd_km=config.fixes.launch_sd_km,
             end_fix=PositionFix(info.end_time, info.end_lat, info.end_lon, config.fixes.end_sd_km) if use_end else None,
-            smooth=config.smoother.enabled,
-            two_filter=config.smoother.two_filter,
-            backward_particles=config.smoother.backward_particles,
+            smoothing=spec.smoothing,
             ambiguity=config.ambiguity,
-            seed=config.filter.seed,
+            seed=spec.seed,
             recovery=_recovery(config),
             factors=context_factors(config, beacons, info),
             guide=Guide(config.filter.guided_fraction) if config.filter.guided_fraction > 0 else None,
         )
+
+    @classmethod
+    def from_problem(cls, problem: FloatProblem) -> Tracker:
+        """The tracker of the pass the user configured (`PassSpec.configured`)."""
+        return cls.for_pass(PassSpec.configured(problem))
 
     def _regions(self) -> Regions | None:
         """Region labels from the first factor that parts the sea (context), if any."""
@@ -166,7 +132,7 @@ class Tracker:
         """The forward filter over the record (and the end fix), with the float's own
         generator; see `ParticleFilter.run` for `keep` and `on_step`. `backward`: the filter
         from the end fix back to the first window, with the drift reversed (its own
-        generator, at most `backward_particles` particles; `rafostrack.smoothing.two_filter`)."""
+        generator, at most `smoothing.backward_particles` particles; `rafostrack.smoothing.two_filter`)."""
         info = self.info
         motion, stream, settings = self.motion, info.float_id, self.settings
         start = PositionFix(info.launch_time, info.launch_lat, info.launch_lon, self.launch_sd_km)
@@ -176,8 +142,8 @@ class Tracker:
                 raise ValueError(f"{info.float_id}: a backward filter starts from the end fix, and there is none")
             motion, stream = self.motion.reversed(), f"{info.float_id} backward"
             start, events = self.end_fix, list(reversed(record.windows))
-            if 0 < self.backward_particles < settings.particles:
-                settings = dataclasses.replace(settings, particles=self.backward_particles)
+            if 0 < self.smoothing.backward_particles < settings.particles:
+                settings = dataclasses.replace(settings, particles=self.smoothing.backward_particles)
         fixes = PositionFixLikelihood(info.float_id)
         pf = ParticleFilter(
             motion,
@@ -197,7 +163,7 @@ class Tracker:
         and no float clock in the state (the backward filter would need it at the end)."""
         end = self.end_fix
         return (
-            self.two_filter
+            self.smoothing.two_filter
             and end is not None
             and not self.factors
             and not isinstance(self.motion, ClockWalk)
@@ -233,50 +199,45 @@ class Tracker:
         record: ArrivalRecord,
         *,
         also_filtered: bool = False,
-        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None = None,
+        extra_cov: NuisanceCov | None = None,
         progress: Callable[[int, int], None] | None = None,
-    ) -> TrackOutput:
-        """Filter the record, then smooth if configured, and summarise. `extra_cov(times)`
+    ) -> PassResult:
+        """Filter the record, then smooth if the pass smooths, and summarise. `extra_cov(times)`
         gives a (n, 2, 2) covariance (km^2) to add to each window's position covariance:
         what the filter's model does not represent (`Calibration.nuisance_cov_at`).
         `progress(done, total)` is told of each filter step.
 
         Without smoothing, each step is summarised as the filter makes it and then dropped,
         so memory does not grow with the record. Smoothing keeps every step's cloud on at
-        most `ffbsm_columns` quantile points of its weights (FFBSm), or each filter's
-        on `two_filter.JOIN_COLUMNS` (`_run_kept`): at most 80 KB per window with a
-        velocity, whatever the particle count. The two-filter smoother's backward filter
+        most `smoothing.ffbsm_columns` quantile points of its weights (FFBSm), or each
+        filter's on `two_filter.JOIN_COLUMNS` (`_run_kept`): at most 80 KB per window with
+        a velocity, whatever the particle count. The two-filter smoother's backward filter
         runs beside the forward one where a core is idle (`_backward`)."""
         started = time.perf_counter()
         filtered = self._builder("filtered")
-        summarised = filtered if also_filtered or not self.smooth else None
+        summarised = filtered if also_filtered or not self.smoothing.enabled else None
         on_step = self._on_step(record, summarised, extra_cov, progress)
-        if not self.smooth:
+        if not self.smoothing.enabled:
             run = self.run_filter(record, keep=False, on_step=on_step)
             estimate = filtered.result()
-            elapsed = time.perf_counter() - started
-            return TrackOutput(
-                estimate, estimate, run.n_resamples, run.warnings, elapsed, 0.0, **_counts(run, filtered)
-            )
+            seconds = Seconds(filter_s=time.perf_counter() - started)
+            return PassResult(estimate, estimate, _counts(run, filtered), tuple(run.warnings), "none", seconds)
         two_filter = self._joins_two_filters(record)
         with self._backward(record, two_filter) as backward:
-            run = self._run_kept(
-                record, JOIN_COLUMNS if two_filter else self.ffbsm_columns, label_probs=also_filtered, on_step=on_step
-            )
+            columns = JOIN_COLUMNS if two_filter else self.smoothing.ffbsm_columns
+            run = self._run_kept(record, columns, label_probs=also_filtered, on_step=on_step)
             filter_s = time.perf_counter() - started
             started = time.perf_counter()
             back = backward.result()
         estimate = self._smoothed_estimate(run, back, extra_cov)
-        smoother_s = time.perf_counter() - started
-        return TrackOutput(
+        seconds = Seconds(filter_s=filter_s, smoother_s=time.perf_counter() - started)
+        return PassResult(
             estimate,
             filtered.result() if also_filtered else None,
-            run.n_resamples,
-            run.warnings,
-            filter_s,
-            smoother_s,
-            **_counts(run),
-            smoother="two_filter" if two_filter else "ffbsm",
+            _counts(run),
+            tuple(run.warnings),
+            "two_filter" if two_filter else "ffbsm",
+            seconds,
         )
 
     def _backward(self, record: ArrivalRecord, two_filter: bool) -> Forked[FilterResult | None]:
@@ -291,7 +252,7 @@ class Tracker:
         self,
         record: ArrivalRecord,
         filtered: EstimateBuilder | None,
-        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
+        extra_cov: NuisanceCov | None,
         progress: Callable[[int, int], None] | None,
     ) -> Callable[[Step], None]:
         """What the filter does with each step it makes: summarise it into `filtered` (when
@@ -312,7 +273,7 @@ class Tracker:
         self,
         run: FilterResult,
         back: FilterResult | None,
-        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
+        extra_cov: NuisanceCov | None,
     ) -> Estimate:
         """The smoothed estimate of a kept run: FFBSm on the forward filter's clouds, or, given
         the backward filter's run `back` (`_joins_two_filters`), both filters joined
@@ -321,7 +282,7 @@ class Tracker:
         (`run.forked`), the same bits."""
         steps = run.steps
         if back is None:
-            smoothed = smooth([s.cloud for s in steps], self.motion, max_columns=self.ffbsm_columns)
+            smoothed = smooth([s.cloud for s in steps], self.motion, max_columns=self.smoothing.ffbsm_columns)
 
             def part(among: range) -> EstimateBuilder:
                 return self._summarised([steps[k] for k in among], smoothed.part(among), extra_cov)
@@ -356,7 +317,7 @@ class Tracker:
         self,
         steps: list[Step],
         smoothed: Smoothed,
-        extra_cov: Callable[[NDArray[np.datetime64]], NDArray[np.float64]] | None,
+        extra_cov: NuisanceCov | None,
     ) -> EstimateBuilder:
         """`steps` summarised under their `smoothed` weights, labels from the smoothed
         clouds; each window's position covariance with the smoother's kernel covariance and
@@ -371,8 +332,14 @@ class Tracker:
         return EstimateBuilder(self.info.float_id, self.beacon_ids, self.ambiguity, kind, self._regions())
 
 
-def _counts(run: FilterResult, builder: EstimateBuilder | None = None) -> dict[str, Any]:
-    """What a filter run counted, for `TrackOutput` (ESS per window from the builder when the
-    run kept no steps)."""
+def _counts(run: FilterResult, builder: EstimateBuilder | None = None) -> FilterCounts:
+    """What a filter run counted (ESS per window from the builder when the run kept no steps)."""
     ess = builder.window_ess if builder is not None else tuple(s.ess for s in run.steps if s.window is not None)
-    return {"filter_ess": tuple(ess), "n_checks": run.n_checks, "n_reseeds": run.n_reseeds}
+    return FilterCounts(run.n_resamples, tuple(ess), run.n_checks, run.n_reseeds)
+
+
+def run_pass(spec: PassSpec, record: ArrivalRecord, progress: Callable[[int, int], None] | None = None) -> PassResult:
+    """Track `record` as `spec` says (`Tracker.for_pass`); `progress(done, total)` is told of
+    each filter step."""
+    tracker = Tracker.for_pass(spec)
+    return tracker.track(record, also_filtered=spec.also_filtered, extra_cov=spec.extra_cov, progress=progress)
