@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import pandas as pd
+from threadpoolctl import threadpool_limits
 
 from ..calibrate import Calibration, calibrate
 from ..calibrate.launch_check import launch_check
@@ -107,7 +108,20 @@ def track_record(
 ) -> TrackOutput:
     """Track one float's record with the configured method (module docstring); the keys the
     user set (`problem.config.explicit`) are not estimated. `progress(done, total, what)` is
-    told of each filter step of each pass."""
+    told of each filter step of each pass.
+
+    The linear algebra of numpy and scipy runs on one BLAS thread (`threadpoolctl`): a
+    multithreaded BLAS sums in another order on another core count, and calibration's
+    values then move in their last bits and every later pass with them. The compiled
+    kernels keep their own threads, which never change the bits (`model.parallel`)."""
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _method(problem, record, also_filtered, progress)
+
+
+def _method(
+    problem: FloatProblem, record: ArrivalRecord, also_filtered: bool, progress: Progress | None
+) -> TrackOutput:
+    """`track_record`'s passes (module docstring)."""
     config = problem.config
     if not config.calibrate.enabled:
         result = run_pass(
