@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rafostrack.sim.stress import DAY_NS, StressConfig, _clutter_toas, simulate_stress, with_knobs
+from rafostrack.sim.stress import DAY_NS, StressConfig, simulate_stress, with_knobs
+from rafostrack.sim.stress_float import _clutter_toas
 
 QUIET = StressConfig(
     days=60, gaps=False, fading=False, bad_propagation=False, multipath=False, outage=False, burst_prob=0.0

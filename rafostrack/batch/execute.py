@@ -28,6 +28,7 @@ import time
 import traceback
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from .. import __version__
 from ..errors import InputError
@@ -35,6 +36,9 @@ from ..io.outdir import staging_dir, swap_into_place
 from ..io.writers import write_json
 from .lock import read_lock_info
 from .plan import FAILED, MANIFEST, MANIFEST_FORMAT, PROCESSED, FloatOutcome, FloatTask
+
+if TYPE_CHECKING:  # a worker imports the pipeline when it tracks its first float
+    from ..run.one_float import TrackInputs
 
 
 def process_float(task: FloatTask) -> FloatOutcome:
@@ -56,23 +60,8 @@ def process_float(task: FloatTask) -> FloatOutcome:
         with kernel_threads(1):  # one float per core
             result = track_float(inputs, staging, plots=task.plots)
         built = Path(result.out_dir)
-        files = {p.name: p.stat().st_size for p in sorted(built.iterdir()) if p.is_file()}
-        manifest = {
-            "format": MANIFEST_FORMAT,
-            "key": task.key,
-            "components": task.components,
-            "mission": task.mission,
-            "float_id": task.float_id,
-            "inputs": {
-                "float_file": str(task.float_path),
-                "config_files": [str(p) for p in inputs.config_layers()],
-            },
-            "files": files,
-            "finished": datetime.now(UTC).isoformat(timespec="seconds"),
-            "host": socket.gethostname(),
-            "pid": os.getpid(),
-        }
-        write_json(built / MANIFEST, manifest)  # last: its presence marks the directory complete
+        # last: the manifest's presence marks the directory complete
+        write_json(built / MANIFEST, float_manifest(task, inputs, built))
         check_run_holds_lock(task)
         swap_into_place(built, task.out_dir)
         warnings = len(result.run.get("warnings", ()))
@@ -98,6 +87,26 @@ def process_float(task: FloatTask) -> FloatOutcome:
         )
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def float_manifest(task: FloatTask, inputs: TrackInputs, built: Path) -> dict[str, Any]:
+    """The float's `batch-manifest.json`: its task, inputs and the files built in `built`."""
+    files = {p.name: p.stat().st_size for p in sorted(built.iterdir()) if p.is_file()}
+    return {
+        "format": MANIFEST_FORMAT,
+        "key": task.key,
+        "components": task.components,
+        "mission": task.mission,
+        "float_id": task.float_id,
+        "inputs": {
+            "float_file": str(task.float_path),
+            "config_files": [str(p) for p in inputs.config_layers()],
+        },
+        "files": files,
+        "finished": datetime.now(UTC).isoformat(timespec="seconds"),
+        "host": socket.gethostname(),
+        "pid": os.getpid(),
+    }
 
 
 def one_line(exc: BaseException) -> str:

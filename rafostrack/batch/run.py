@@ -34,7 +34,7 @@ from .corrections import write_supported_tables
 from .discover import Mission, discover
 from .findings import findings_csv
 from .lock import BatchLock
-from .plan import FAILED, SKIPPED, FloatOutcome, plan
+from .plan import FAILED, SKIPPED, FloatOutcome, FloatTask, plan
 from .pool import dask_client, local_workers, run_dask, run_local
 from .report import (
     FINDINGS_NAME,
@@ -135,8 +135,6 @@ def _run_locked(
     options: BatchOptions, missions: list[Mission], lock: BatchLock, reporter: Reporter, client: Any
 ) -> tuple[list[FloatOutcome], str]:
     """Everything done while holding OUT's lock: clean, plan, run, write the reports."""
-    from ..io.atomic import write_text_atomic
-
     started = time.monotonic()
     out = options.out
     reporter.log(
@@ -145,13 +143,35 @@ def _run_locked(
         console=False,
     )
     clean_stale(out, missions, reporter.log)
+    tasks, known = _plan_floats(options, missions, lock, reporter, client)
+    reporter.start(len(tasks))
+    outcomes = list(known)
+    try:
+        if client is not None:
+            runner = run_dask(tasks, client)
+        else:
+            runner = run_local(tasks, options.jobs, on_stderr=lambda text: _log_worker_stderr(reporter, text, out))
+        for outcome in runner:
+            outcomes.append(outcome)
+            reporter.done(outcome)
+    finally:
+        reporter.finish()
+    outcomes.sort(key=lambda o: (o.mission, o.float_id))
+    return outcomes, _write_reports(options, missions, reporter, outcomes, started)
+
+
+def _plan_floats(
+    options: BatchOptions, missions: list[Mission], lock: BatchLock, reporter: Reporter, client: Any
+) -> tuple[list[FloatTask], list[FloatOutcome]]:
+    """The floats to run and those known without running (skipped, or failed before
+    running), each logged."""
     for mission in missions:
         if mission.orphans:
             names = ", ".join(f"{f}.csv" for f in mission.orphans)
             reporter.log(f"{mission.name}: ignoring {names} (no row in floats.csv)", console=False)
     tasks, known = plan(
         missions,
-        out,
+        options.out,
         config_files=options.config_files,
         overrides=options.overrides,
         plots=options.plots,
@@ -172,19 +192,18 @@ def _run_locked(
     for outcome in known:
         line = f"{outcome.mission}/{outcome.float_id} {outcome.status}: {outcome.reason}"
         reporter.log(line, console=outcome.status == FAILED)
-    reporter.start(len(tasks))
-    outcomes = list(known)
-    try:
-        if client is not None:
-            runner = run_dask(tasks, client)
-        else:
-            runner = run_local(tasks, options.jobs, on_stderr=lambda text: _log_worker_stderr(reporter, text, out))
-        for outcome in runner:
-            outcomes.append(outcome)
-            reporter.done(outcome)
-    finally:
-        reporter.finish()
-    outcomes.sort(key=lambda o: (o.mission, o.float_id))
+    return tasks, known
+
+
+def _write_reports(
+    options: BatchOptions, missions: list[Mission], reporter: Reporter, outcomes: list[FloatOutcome], started: float
+) -> str:
+    """The run's reports in OUT (the summary, the findings, the supported tables, the
+    overview, batch.log, in this order); returns the summary table to print (the run's
+    seconds counted from `started`, a `time.monotonic()`)."""
+    from ..io.atomic import write_text_atomic
+
+    out = options.out
     findings = report_findings(reporter, outcomes, out)
     table = summary_table(outcomes, time.monotonic() - started, out)
     reporter.lines.extend(table.splitlines())
@@ -193,7 +212,7 @@ def _run_locked(
     write_supported_tables(findings, {m.name: m.path / "beacons.csv" for m in missions}, out, reporter.log)
     report_overview(reporter, outcomes, out, findings, plots=options.plots)
     write_text_atomic(out / LOG_NAME, "\n".join(reporter.lines) + "\n")
-    return outcomes, table
+    return table
 
 
 def _log_worker_stderr(reporter: Reporter, text: str, out: Path) -> None:

@@ -40,9 +40,10 @@ variance that comes from the uncertain clock and timing parameters (law of total
 velocities. A particle filter run with the fitted values does not see it; the tracker adds
 it to the filter's covariance.
 
-The model and its assembly are in `calibrate.kalman_problem`, the solution, evidence and
-hyperparameter fit in `calibrate.kalman_evidence`; this module runs the fit and re-exports
-what callers use.
+The model is in `calibrate.kalman_problem`, its rows and their normal terms in
+`calibrate.kalman_rows`, its assembly at a linearisation point in `calibrate.kalman_terms`,
+the solution, evidence and hyperparameter fit in `calibrate.kalman_evidence`; this module
+runs the fit and re-exports what callers use.
 """
 
 from __future__ import annotations
@@ -64,7 +65,8 @@ from .kalman_evidence import (
     solve_step,
     solved,
 )
-from .kalman_problem import CLOCK, NODE, VELOCITY, Hyper, KalmanPriors, Linearised, Problem, linearise, node_positions
+from .kalman_problem import CLOCK, NODE, VELOCITY, Hyper, KalmanPriors, Problem, node_positions
+from .kalman_terms import Linearised, linearise
 
 __all__ = [
     "Hyper",

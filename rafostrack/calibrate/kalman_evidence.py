@@ -14,7 +14,9 @@ from scipy import sparse
 from scipy.optimize import minimize
 
 from .banded import BorderedBanded
-from .kalman_problem import HYPER_FIELDS, LOG_2PI, NODE, Block, Hyper, Linearised, Normal, Problem, Rows
+from .kalman_problem import HYPER_FIELDS, LOG_2PI, NODE, Hyper, Problem
+from .kalman_rows import Block, Normal, Rows
+from .kalman_terms import Linearised
 
 
 def factorise(problem: Problem, normal: sparse.spmatrix) -> BorderedBanded:

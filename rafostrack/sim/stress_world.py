@@ -20,7 +20,7 @@ from ..domain import BeaconTable, NaT
 from ..model.geodesy import displace, local_offsets_km, range_m
 
 if TYPE_CHECKING:
-    from .stress import StressConfig
+    from .stress_config import StressConfig
 
 DAY_NS = np.timedelta64(86400, "s").astype("timedelta64[ns]")
 
