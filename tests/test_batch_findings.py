@@ -29,10 +29,10 @@ from rafostrack.batch.findings import (
     findings_csv,
     median_value,
     mission_findings,
-    parse_checks,
     pooled_check,
 )
 from rafostrack.batch.report import report_findings
+from rafostrack.batch.run_checks import parse_checks
 from rafostrack.calibrate.metadata_checks import MetadataCheck, SourceInformation
 from rafostrack.cli import main
 from rafostrack.model.geodesy import displace
@@ -84,7 +84,7 @@ def _tree(out: Path, runs: dict[tuple[str, str], dict[str, Any] | str], status: 
 
 
 def _run(float_id: str, *entries: dict[str, Any]) -> dict[str, Any]:
-    return {"float_id": float_id, "warnings": [], "metadata_checks": list(entries)}
+    return {"float_id": float_id, "warnings": [], "warning_kinds": [], "metadata_checks": list(entries)}
 
 
 # --------------------------------------------------------------------------------------
@@ -173,6 +173,23 @@ def test_consistent_undetermined_and_missing_checks_give_no_finding(tmp_path):
     findings, unreadable = batch_findings(_tree(tmp_path, runs))
     assert findings == [] and unreadable == []
     assert findings_csv(findings) == ",".join(FINDINGS_COLUMNS) + "\n"
+
+
+def test_findings_read_the_checks_never_the_warnings(tmp_path):
+    """The findings come from `metadata_checks` alone: the same checks with their warnings
+    worded otherwise (or of other kinds, or none) give the same findings."""
+    entries = (_offset(90.2, "contradicted"), _clock("f1", 2, -12.0, 11.8, "contradicted"))
+    said = {
+        "today": ["beacons.csv: line 5: field 'offset_s' of B3: given 120 s; the arrivals support 90.2 s"],
+        "reworded": ["B3 is early"],
+    }
+    found = {}
+    for name, warnings in said.items():
+        run = {**_run("f1", *entries), "warnings": warnings, "warning_kinds": ["metadata"]}
+        found[name] = batch_findings(_tree(tmp_path / name, {("m", "f1"): run}))[0]
+    none = batch_findings(_tree(tmp_path / "none", {("m", "f1"): {**_run("f1", *entries), "warnings": []}}))[0]
+    assert len(found["today"]) == 2
+    assert [f.row() for f in found["reworded"]] == [f.row() for f in found["today"]] == [f.row() for f in none]
 
 
 def test_the_source_is_told_from_the_float_by_file_name_or_id():

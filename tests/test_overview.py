@@ -29,11 +29,10 @@ from rafostrack.batch.overview import (
     FloatRow,
     LookRules,
     Overview,
-    judged,
-    overview_html,
-    run_values,
-    warning_kind,
 )
+from rafostrack.batch.overview_page import overview_html
+from rafostrack.batch.overview_rows import run_values, warning_counts
+from rafostrack.batch.triage import judged
 from rafostrack.cli import main
 from rafostrack.config import load_config
 from rafostrack.plots.base import figure
@@ -209,26 +208,50 @@ def test_order_failed_then_most_reasons_then_ok_by_mission_and_id():
     ]
 
 
-def test_warnings_are_sorted_into_kinds():
-    cases = {
-        "beacons.csv: line 4: field 'offset_s' of US1-3: given 1530 s; the arrivals support 1497 s (sd 2.19 s); "
-        "tracked with the arrivals' value": "metadata",
-        "floats.csv: line 3: field 'clock_offset_end_s' of f1 is empty; estimated from the arrivals: -2 s (sd 1 s)": (
-            "metadata"
-        ),
-        "f1: the end fix is 80.2 km from every particle (16 sd); its sd was widened to 40.0 km": "end fix",
-        "f1.csv: no usable beacon (no window with an active beacon and a stored TOA) for more than 10 days: x": "gaps",
-        "f1.csv: 3 window(s) with no active beacon (beacons.csv start/end), tracked by the drift model only: x": "gaps",
-        "f1: window 2009-01-02T00:00:00Z: TOA 700 s labelled B is 9 sd from every particle's prediction; "
-        "its sd was widened 2.1x": "outlier TOAs",
-        "f1.csv: 2 duplicate row(s) (same time and toa_s) dropped (first at line 4)": "arrival file",
-        "f1.csv: 1 TOA(s) outside the window [0, 4000] s dropped (1 negative, 0 beyond window_s; first at x)": (
-            "arrival file"
-        ),
-        "f1: too few confident arrivals to calibrate; tracked with the configured values": "calibration",
-        "removed out/.f1.tmp-12 (left by an interrupted run)": "other",
+def test_warnings_are_counted_by_the_kind_run_json_gives_them():
+    """The kinds are read from run.json's `warning_kinds` (set where each warning was made),
+    never from the wording; a run.json without them (an older version), or whose kinds do
+    not pair with its warnings, counts each warning as "other"."""
+    warnings = ["a", "b", "c", "d"]
+    kinds = ["metadata", "end fix", "metadata", "gaps"]
+    assert warning_counts({"warnings": warnings, "warning_kinds": kinds}) == {"metadata": 2, "end fix": 1, "gaps": 1}
+    older = {"warnings": ["f1: the end fix is 80.2 km from every particle (16 sd); its sd was widened to 40.0 km"]}
+    assert warning_counts(older) == {"other": 1}
+    assert warning_counts({**older, "warning_kinds": ["end fix", "gaps"]}) == {"other": 1}
+    assert warning_counts({"warnings": [], "warning_kinds": []}) == warning_counts({}) == {}
+
+
+def _with_warnings(out: Path, float_id: str, warnings: list[str], kinds: list[str]) -> None:
+    path = out / "m1" / float_id / "run.json"
+    run = json.loads(path.read_text())
+    run["warnings"], run["warning_kinds"] = warnings, kinds
+    path.write_text(json.dumps(run))
+
+
+def test_rewording_a_warning_leaves_the_triage_unchanged(batch_out, tmp_path):
+    """Two copies of a tree whose sim2 warns of the same kinds (an end fix far from every
+    particle, a contradicted table value, a gap) in entirely different words: `summary`
+    gives both the same look, reasons and warning counts (the kind, not the wording, is read)."""
+    kinds = ["end fix", "metadata", "gaps"]
+    wordings = {
+        "today": [
+            "sim2: the end fix is 80.2 km from every particle (16 sd); its sd was widened to 40.0 km",
+            "floats.csv: line 3: field 'clock_offset_end_s' of sim2 is empty; estimated from the arrivals: -2 s",
+            "sim2.csv: no usable beacon (no window with an active beacon and a stored TOA) for more than 10 days: x",
+        ],
+        "reworded": ["the surfacing position disagrees with the cloud", "a float table cell was filled in", "silence"],
     }
-    assert {message: warning_kind(message) for message in cases} == cases
+    rows = {}
+    for name, warnings in wordings.items():
+        out = Path(shutil.copytree(batch_out[0], tmp_path / name))
+        _with_warnings(out, "sim2", warnings, kinds)
+        result = _summary(out)
+        assert result.exit_code == 0, result.output
+        rows[name] = next(r for r in _rows(out / OVERVIEW_CSV) if r["float_id"] == "sim2")
+    triage = ("look", "reasons", "n_warnings", "warning_kinds")
+    assert {k: rows["reworded"][k] for k in triage} == {k: rows["today"][k] for k in triage}
+    assert rows["reworded"]["look"] == NEEDS_LOOK and "end fix far from every particle" in rows["reworded"]["reasons"]
+    assert rows["reworded"]["warning_kinds"] == "end fix=1;gaps=1;metadata=1"
 
 
 def test_run_values_read_the_calibration_the_clock_and_the_contradictions():
@@ -246,6 +269,7 @@ def test_run_values_read_the_calibration_the_clock_and_the_contradictions():
              "supported_lat_lon": [-58.3, -100.2]},
         ],
         "warnings": ["f1: the end fix is 80.2 km from every particle (16 sd); its sd was widened to 40.0 km"],
+        "warning_kinds": ["end fix"],
     }  # fmt: skip
     values = run_values(run, "f1")
     assert (values["sound_speed_m_s"], values["sound_speed_calibrated"]) == (1475.5, True)

@@ -1,10 +1,10 @@
 """The metadata findings of a batch: which table values the arrivals contradict, per mission.
 
 Each tracked float's `run.json` holds `metadata_checks`: one entry per value the tracker
-took from `floats.csv` / `beacons.csv` and checked against the arrivals (file, line, id,
-field, given, supported, sd, unit, outcome, used). A batch reads those of every float whose
-outputs are current (processed in this run, or skipped as unchanged) and gathers them per
-mission into one finding per value (file, id, field) contradicted on at least one float:
+took from `floats.csv` / `beacons.csv` and checked against the arrivals (`run_checks`). A
+batch reads those of every float whose outputs are current (processed in this run, or
+skipped as unchanged) and gathers them per mission into one finding per value (file, id,
+field) contradicted on at least one float:
 
 - a `beacons.csv` value (a source's offset, drift, position, active period) is heard by
   every float near the source, so a wrong one shows on each of them: it is one finding for
@@ -13,8 +13,7 @@ mission into one finding per value (file, id, field) contradicted on at least on
 - a `floats.csv` value belongs to one float: one finding per float.
 
 The supported value of a finding is the median, over the floats that contradict it, of the
-value each one's arrivals support (times: the median instant). A `run.json` without the key
-(written by an older version) holds no checks.
+value each one's arrivals support (times: the median instant).
 
 A source's offset or drift is also weighed on the floats' arrivals together: each float's
 estimate x_k (sd s_k) comes from its own arrivals, independent of the others', so they pool
@@ -46,8 +45,6 @@ rerunning (`corrections` writes the table with the strongest one corrected).
 from __future__ import annotations
 
 import dataclasses
-import json
-import math
 import statistics
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -57,18 +54,12 @@ from typing import Any
 
 import numpy as np
 
-from ..calibrate.metadata_checks import (
-    CONTRADICTED,
-    TOLERANCE_SETTING,
-    UNDETERMINED,
-    SourceInformation,
-    along_itself,
-    outcome_of,
-    undecided_note,
-)
+from ..calibrate.metadata_checks import CONTRADICTED, UNDETERMINED, along_itself, outcome_of, undecided_note
 from ..io.writers import csv_text
 from ..model.geodesy import displace
 from .plan import FAILED, SKIPPED, FloatOutcome
+from .run_checks import Check, LatLon, Value, read_run_checks
+from .run_checks import parse_checks as parse_checks  # re-exported: callers read run.json checks from here too
 
 FINDINGS_NAME = "metadata-findings.csv"
 FINDINGS_COLUMNS = (
@@ -94,51 +85,9 @@ FINDINGS_COLUMNS = (
     "alternatives",
     "other_sources",
 )
-# The pooled fields and the [checks] tolerance that judges each.
-POOLED_TOLERANCE = {field: TOLERANCE_SETTING[field] for field in ("offset_s", "drift_s_per_day", "position")}
 LINEAR_LIMIT_KM = 100.0  # d^2 / 2R: 5 km at a range of 1000 km
 _SHOWN_FLOATS = 5  # float ids printed per finding (all of them are in the CSV)
 _DIGITS = {"s": 1, "km": 1, "s/day": 4, "deg": 4}
-
-Value = float | str | None
-LatLon = tuple[float, float] | None
-
-
-@dataclass(frozen=True)
-class Check:
-    """One entry of one float's `metadata_checks`."""
-
-    float_id: str  # the float whose run.json holds it
-    file: str  # the path as the run was given it
-    line: int | None
-    id: str  # float_id (floats.csv) or beacon_id (beacons.csv)
-    field: str
-    unit: str
-    given: Value
-    supported: Value
-    outcome: str
-    given_lat_lon: LatLon = None  # a fix or a source position: given is 0, supported the distance (km)
-    supported_lat_lon: LatLon = None
-    sd: float | None = None  # the sd of the float's arrivals' value
-    tolerance: float | None = None  # the run's [checks] tolerance and z-score for the field
-    z_score: float | None = None
-    alternatives: tuple[str, ...] = ()  # other fields of the row the arrivals would blame as well
-    other_sources: tuple[str, ...] = ()  # other sources whose schedule they would blame as well
-    information: SourceInformation | None = None  # a source position's: the float's arrivals on the source
-
-    @property
-    def key(self) -> tuple[str, str, str]:
-        """What names the table value across floats: file name, id, field (the file's
-        directory may differ between floats tracked in different runs)."""
-        return (PurePath(self.file).name, self.id, self.field)
-
-    @property
-    def of_source(self) -> bool:
-        """A beacons.csv value (shared by the floats that hear the source), not the float's own."""
-        name = PurePath(self.file).name
-        if name in ("beacons.csv", "floats.csv"):
-            return name == "beacons.csv"
-        return self.id != self.float_id
 
 
 @dataclass(frozen=True)
@@ -242,90 +191,6 @@ def format_value(value: Value, unit: str) -> str:
     return f"{number} {unit}" if unit and unit != "time" else number
 
 
-def parse_checks(run: Mapping[str, Any], float_id: str) -> list[Check]:
-    """The `metadata_checks` of one run.json payload (none when the key is missing); entries
-    that lack a file, id or field are left out. `float_id` is used when the run names none."""
-    entries = run.get("metadata_checks")
-    if not isinstance(entries, list):
-        return []
-    own = str(run.get("float_id") or float_id)
-    config = run.get("config")
-    settings = config.get("checks") if isinstance(config, Mapping) else None
-    settings = settings if isinstance(settings, Mapping) else {}
-    checks = []
-    for entry in entries:
-        if not isinstance(entry, Mapping) or not all(entry.get(k) not in (None, "") for k in ("file", "id", "field")):
-            continue
-        line = entry.get("line")
-        checks.append(
-            Check(
-                float_id=own,
-                file=str(entry["file"]),
-                line=line if isinstance(line, int) and not isinstance(line, bool) else None,
-                id=str(entry["id"]),
-                field=str(entry["field"]),
-                unit=str(entry.get("unit") or ""),
-                given=_value(entry.get("given")),
-                supported=_value(entry.get("supported")),
-                outcome=str(entry.get("outcome") or "missing"),
-                given_lat_lon=_lat_lon(entry.get("given_lat_lon")),
-                supported_lat_lon=_lat_lon(entry.get("supported_lat_lon")),
-                sd=number(entry.get("sd")),
-                tolerance=number(settings.get(POOLED_TOLERANCE.get(str(entry["field"]), ""))),
-                z_score=number(settings.get("z_score")),
-                alternatives=_names(entry.get("alternatives")),
-                other_sources=_names(entry.get("other_sources")),
-                information=_information(entry.get("information")),
-            )
-        )
-    return checks
-
-
-def _information(value: Any) -> SourceInformation | None:
-    """A run.json `information` entry (None when missing or malformed)."""
-    if not isinstance(value, Mapping):
-        return None
-    try:
-        matrix = np.asarray(value["matrix"], dtype=float)
-        vector = np.asarray(value["vector"], dtype=float)
-        at = np.asarray(value["at"], dtype=float)
-    except (KeyError, TypeError, ValueError):
-        return None
-    if matrix.shape != (4, 4) or vector.shape != (4,) or at.shape != (2,):
-        return None
-    if not (np.isfinite(matrix).all() and np.isfinite(vector).all() and np.isfinite(at).all()):
-        return None
-    return SourceInformation(tuple(map(tuple, matrix.tolist())), tuple(vector.tolist()), (float(at[0]), float(at[1])))
-
-
-def number(value: Any) -> float | None:
-    """A JSON value as a finite float, None for anything else (missing, text, bool, NaN)."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        return None
-    return float(value)
-
-
-def _value(value: Any) -> Value:
-    if isinstance(value, bool) or value is None:
-        return None
-    if isinstance(value, int | float):
-        return float(value)
-    return str(value)
-
-
-def _names(value: Any) -> tuple[str, ...]:
-    """A JSON list of field or source names (anything else: none)."""
-    return tuple(str(v) for v in value) if isinstance(value, list | tuple) else ()
-
-
-def _lat_lon(value: Any) -> LatLon:
-    if not isinstance(value, list | tuple) or len(value) != 2:
-        return None
-    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
-        return None
-    return (float(value[0]), float(value[1]))
-
-
 def mission_findings(mission: str, checks: Iterable[Check]) -> list[Finding]:
     """One finding per (file name, id, field) contradicted on at least one float, sorted by
     file, line, id and field. Per value: k = floats whose entry is contradicted, n = floats
@@ -420,7 +285,7 @@ def pooled_position(checks: Sequence[Check]) -> Pooled | None:
 
 def _poolable(check: Check) -> bool:
     """A value, an sd and the settings to judge a pool by (`parse_checks` sets a tolerance
-    only for the pooled fields, `POOLED_TOLERANCE`)."""
+    only for the pooled fields, `run_checks.POOLED_TOLERANCE`)."""
     return (
         isinstance(check.supported, float)
         and check.sd is not None
@@ -498,15 +363,6 @@ def _instant(text: str) -> datetime | None:
 def _iso(when: datetime) -> str:
     text = when.isoformat(timespec="seconds")
     return text[:-6] + "Z" if text.endswith("+00:00") else text
-
-
-def read_run_checks(run_json: Path, float_id: str) -> list[Check] | None:
-    """The metadata checks of one float's run.json; None when the file cannot be read."""
-    try:
-        run = json.loads(Path(run_json).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return parse_checks(run, float_id) if isinstance(run, dict) else None
 
 
 def batch_findings(outcomes: Sequence[FloatOutcome]) -> tuple[list[Finding], list[str]]:

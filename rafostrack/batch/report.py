@@ -10,7 +10,7 @@ Guarantees:
   `batch.log`, each line time-stamped (UTC).
 - The summary table lists every float processed or failed, with its reason, and the totals
   (skipped floats are counted; all floats are listed in `batch-summary.csv`, one row each,
-  columns `SUMMARY_COLUMNS`). `run.py` writes both files atomically at the end of the run.
+  columns `SUMMARY_COLUMNS`: `summary_file.py`). `run.py` writes both files atomically at the end of the run.
 - The metadata findings (`findings.py`): one line per table value the arrivals contradict,
   printed at the end, and `metadata-findings.csv` (columns `FINDINGS_COLUMNS`; a header
   only when there is none), which `run.py` writes atomically beside `batch-summary.csv`.
@@ -34,10 +34,9 @@ from ..io.writers import csv_text
 from .findings import FINDINGS_NAME, Finding, batch_findings
 from .overview import OK, OVERVIEW_HTML, build_overview, write_overview
 from .plan import FAILED, PROCESSED, SKIPPED, FloatOutcome
+from .summary_file import SUMMARY_COLUMNS, SUMMARY_NAME
 
-SUMMARY_NAME = "batch-summary.csv"
 LOG_NAME = "batch.log"
-SUMMARY_COLUMNS = ("mission", "float_id", "status", "reason", "seconds", "warnings", "output")
 
 _BAR_FORMAT = "{percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} floats [{elapsed}<{remaining}{postfix}]"
 

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from ..config import FilterConfig
 from ..domain import Cloud, Particles, PositionFix, Window, days_between
+from ..errors import Notice, WarningKind
 from ..likelihoods import ArrivalLikelihood, Evidence, Likelihood, MoveFactor
 from ..motion import MotionModel
 from .guided import Guide
@@ -383,7 +384,10 @@ def _finite_loglik(loglik: NDArray, obs: Observation, float_id: str, warnings: l
         return loglik, False
     when = f"{float_id}: {np.datetime_as_string(obs.time, 's')}Z"
     if bad.all():
-        warnings.append(f"{when}: likelihood not finite for any particle; this step was skipped")
+        warnings.append(
+            Notice(WarningKind.LIKELIHOOD, f"{when}: likelihood not finite for any particle; this step was skipped")
+        )
         return np.zeros_like(loglik), True
-    warnings.append(f"{when}: likelihood not finite for {int(bad.sum())} particle(s); they were dropped")
+    dropped = f"{when}: likelihood not finite for {int(bad.sum())} particle(s); they were dropped"
+    warnings.append(Notice(WarningKind.LIKELIHOOD, dropped))
     return np.where(bad, -np.inf, loglik), False

@@ -11,7 +11,8 @@ them to `window_arrivals`, which applies the rules once for every format:
 - windows opening less than window_s after the previous one, windows with no active
   beacon, and stretches of more than `USABLE_GAP_DAYS` with no usable window are warned about.
 
-Each rule that fires adds one warning naming the file and the first entry concerned, as
+Each rule that fires adds one warning naming the file and the first entry concerned (of
+kind `ARRIVAL_FILE`; windows with no active or usable beacon `GAPS`), as
 the reader names its entries (`EntryNames`: a CSV line, a MATLAB TOA entry, a NetCDF
 measurement). `build_record` is the front door for readers of formats other than CSV: it
 checks the arrays (some window, no missing time, none before the launch) then windows them.
@@ -29,7 +30,7 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from ..domain import ArrivalRecord, BeaconTable, FloatInfo, LateArrival, Window
-from ..errors import InputError, Warnings
+from ..errors import InputError, WarningKind, Warnings
 from .csv_table import time_text
 
 # A stretch longer than this with no window that has an active beacon and a stored TOA is
@@ -338,7 +339,8 @@ def _warn_beaconless(
     if none_active.any():
         warnings.add(
             f"{path}: {int(none_active.sum())} window(s) with no active beacon (beacons.csv start/end), "
-            f"tracked by the drift model only: {_list_runs(win_times, none_active)}"
+            f"tracked by the drift model only: {_list_runs(win_times, none_active)}",
+            kind=WarningKind.GAPS,
         )
     usable = ~none_active & (n_stored > 0)
     anchors = np.concatenate(([info.launch_time], win_times[usable], [win_times[-1]]))
@@ -351,5 +353,6 @@ def _warn_beaconless(
         more = f"; and {len(long) - _LIST_MAX} more" if len(long) > _LIST_MAX else ""
         warnings.add(
             f"{path}: no usable beacon (no window with an active beacon and a stored TOA) for more than "
-            f"{USABLE_GAP_DAYS:g} days: {'; '.join(parts)}{more}; the track there follows the drift model only"
+            f"{USABLE_GAP_DAYS:g} days: {'; '.join(parts)}{more}; the track there follows the drift model only",
+            kind=WarningKind.GAPS,
         )

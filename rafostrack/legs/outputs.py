@@ -21,6 +21,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from .. import __version__
+from ..errors import kind_of
 from ..io.writers import file_digest, write_json, write_parquet
 from ..run.one_float import LoadedFloat, TrackInputs
 from ..summaries.estimates import TRACK_COLUMNS
@@ -135,7 +136,10 @@ def track_frame(fit: LegFit) -> pd.DataFrame:
 
 
 def run_record(fit: LegFit, loaded: LoadedFloat, inputs: TrackInputs, total_s: float) -> dict[str, Any]:
+    """The legs_run.json payload; its warnings (reading the inputs, then the smoother's) each
+    with its kind (`warning_kinds`, in the same order)."""
     k = fit.chain.n_legs
+    warnings = [*loaded.warnings.messages, *fit.smoother.warnings]
     files = {"float_file": inputs.float_path, "beacons": inputs.resolved_beacons()}
     floats_path = inputs.resolved_floats()
     if floats_path is not None:
@@ -167,7 +171,8 @@ def run_record(fit: LegFit, loaded: LoadedFloat, inputs: TrackInputs, total_s: f
             "posterior_q95": int(np.quantile(k, 0.95)),
         },
         "smoother_calibration": fit.smoother.calibration,
-        "warnings": [*loaded.warnings.messages, *fit.smoother.warnings],
+        "warnings": warnings,
+        "warning_kinds": [kind_of(message) for message in warnings],
     }
 
 

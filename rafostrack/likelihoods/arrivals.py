@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from ..config import Config, ModelConfig, QualityConfig
 from ..domain import BeaconTable, FloatInfo, Particles, Window
 from ..engines import Engine, SimulatingEngine, WindowPrediction, engine_from_config
-from ..errors import InputError
+from ..errors import InputError, Notice, WarningKind
 from ..model import measurement as m
 from .base import Evidence, Likelihood, outlier_scale
 from .quality import quality_log_ratio
@@ -189,9 +189,12 @@ class LabelledArrivals(ArrivalLikelihood):
             nearest[labelled] = np.abs(resid).min(axis=0) / self.model.toa_sigma_s
         scale = outlier_scale(nearest)
         warnings = tuple(
-            f"{self.info.float_id}: window {np.datetime_as_string(window.time, 's')}Z: TOA {window.toa_s[j]:g} s "
-            f"labelled {window.beacon_id[j]} is {nearest[j]:.0f} sd from every particle's prediction; "
-            f"its sd was widened {scale[j]:.1f}x"
+            Notice(
+                WarningKind.OUTLIER_TOAS,
+                f"{self.info.float_id}: window {np.datetime_as_string(window.time, 's')}Z: TOA {window.toa_s[j]:g} s "
+                f"labelled {window.beacon_id[j]} is {nearest[j]:.0f} sd from every particle's prediction; "
+                f"its sd was widened {scale[j]:.1f}x",
+            )
             for j in np.flatnonzero(scale > 1.0)
         )
         loglik = m.labeled_loglik(mu, window.toa_s, label_index, self.model, sigma_scale=scale)

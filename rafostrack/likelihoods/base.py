@@ -40,7 +40,7 @@ class Evidence:
     loglik: NDArray[np.float64]  # (P,)
     beacon_index: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, dtype=np.intp))  # (s,) table rows
     p_match: NDArray[np.float64] | None = None  # (P, s, K) association marginals, if any
-    warnings: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()  # each a `Notice`, its kind set by the component that makes it
 
 
 class Likelihood(ABC):

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..domain import Particles, PositionFix
+from ..errors import Notice, WarningKind
 from ..model.geodesy import local_offsets_km
 from .base import Evidence, Likelihood, outlier_scale
 
@@ -42,8 +43,11 @@ class PositionFixLikelihood(Likelihood):
         warnings: tuple[str, ...] = ()
         if scale > 1.0:
             warnings = (
-                f"{self.float_id}: the end fix is {nearest:.1f} km from every particle "
-                f"({nearest / fix.sd_km:.0f} sd); its sd was widened to {fix.sd_km * scale:.1f} km",
+                Notice(
+                    WarningKind.END_FIX,
+                    f"{self.float_id}: the end fix is {nearest:.1f} km from every particle "
+                    f"({nearest / fix.sd_km:.0f} sd); its sd was widened to {fix.sd_km * scale:.1f} km",
+                ),
             )
         loglik = fix_loglik(particles.lat, particles.lon, fix.lat, fix.lon, fix.sd_km * scale)
         return Evidence(loglik, warnings=warnings)

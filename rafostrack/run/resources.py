@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import Notice, WarningKind
+
 BASE_BYTES = 350e6  # the interpreter, numpy, the record and the capped calibration passes
 BYTES_PER_PARTICLE = 500.0
 SECONDS_PER_PARTICLE_WINDOW = 1.5e-6  # one core, the default method
@@ -34,13 +36,15 @@ def estimate(particles: int, windows: int) -> tuple[float, float]:
     return BASE_BYTES + BYTES_PER_PARTICLE * particles, SECONDS_PER_PARTICLE_WINDOW * particles * windows
 
 
-def memory_warning(particles: int, windows: int, available: float | None) -> str | None:
-    """A one-line warning when the run's estimated memory passes `MEMORY_SHARE` of `available`."""
+def memory_warning(particles: int, windows: int, available: float | None) -> Notice | None:
+    """A one-line warning (a `MEMORY` notice) when the run's estimated memory passes
+    `MEMORY_SHARE` of `available`."""
     needed, seconds = estimate(particles, windows)
     if available is None or needed <= MEMORY_SHARE * available:
         return None
-    return (
+    return Notice(
+        WarningKind.MEMORY,
         f"{particles} particles on {windows} windows need about {needed / 1e9:.1f} GB and {seconds / 60:.0f} min "
         f"of one core; this machine has {available / 1e9:.1f} GB available: expect swapping or a memory error "
-        f"(fewer particles: about {int((MEMORY_SHARE * available - BASE_BYTES) / BYTES_PER_PARTICLE)} fit)"
+        f"(fewer particles: about {int((MEMORY_SHARE * available - BASE_BYTES) / BYTES_PER_PARTICLE)} fit)",
     )
