@@ -1,11 +1,12 @@
 """run/progress.py off a terminal (`LineProgress`): a short run prints nothing; a long one
-says where it is, at most once per interval, on the stream it was given."""
+says where it is, at most once per interval, on the stream it was given. On a terminal, a bar."""
 
 from __future__ import annotations
 
 import io
+import re
 
-from rafostrack.run.progress import LineProgress, NoProgress, progress_for
+from rafostrack.run.progress import PHASES, LineProgress, progress_for
 
 
 class _Clock:
@@ -40,6 +41,36 @@ def test_a_long_run_off_a_terminal_says_where_it_is_once_a_minute() -> None:
     assert len(lines) == 5 and all(line.startswith("rafostrack: float759: tracking, pass 2 of 3, ") for line in lines)
 
 
-def test_off_a_terminal_the_progress_is_line_progress() -> None:
-    assert isinstance(progress_for(io.StringIO(), "f"), LineProgress)
-    assert not isinstance(progress_for(io.StringIO(), "f"), NoProgress)
+class _Terminal(io.StringIO):
+    """A stream that says it is a terminal, as a console does."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+def _short_run(stream: io.StringIO) -> str:
+    """What a user sees on `stream` of a short run reported to `progress_for(stream)`."""
+    progress = progress_for(stream, "float759")
+    for phase in ("reading inputs", "tracking"):
+        progress.phase(phase)
+    for done in range(1, 11):
+        progress.step(done, 10, "pass 1 of 3")
+    progress.phase("writing outputs")
+    progress.close()
+    return stream.getvalue()
+
+
+def test_progress_for_draws_a_bar_on_a_terminal_and_nothing_off_one_in_a_short_run() -> None:
+    """On a terminal: one bar, redrawn in place (carriage returns), naming the float, the
+    phases done of four and the current phase, in order, and cleared at the end. Off a
+    terminal (a pipe, a log file) the same short run prints nothing at all."""
+    assert _short_run(io.StringIO()) == ""
+    shown = _short_run(_Terminal())
+    assert shown.startswith("\r") and shown.endswith("\r") and "\n" not in shown
+    *drawn, cleared = shown.split("\r")[1:-1]
+    assert cleared.strip() == ""  # the bar leaves no line behind
+    bars = [re.fullmatch(r"float759: (\d)/4 \[\d\d:\d\d\] (?:, )?(.*?) *", bar) for bar in drawn]
+    assert all(bars), drawn
+    # Each phase drawn as it starts (a redraw every REFRESH_S may draw it again).
+    phases = list(dict.fromkeys((int(bar[1]), bar[2]) for bar in bars if bar[2] in PHASES))
+    assert phases == [(0, "reading inputs"), (1, "tracking"), (2, "writing outputs")], drawn
