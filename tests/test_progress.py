@@ -74,3 +74,25 @@ def test_progress_for_draws_a_bar_on_a_terminal_and_nothing_off_one_in_a_short_r
     # Each phase drawn as it starts (a redraw every REFRESH_S may draw it again).
     phases = list(dict.fromkeys((int(bar[1]), bar[2]) for bar in bars if bar[2] in PHASES))
     assert phases == [(0, "reading inputs"), (1, "tracking"), (2, "writing outputs")], drawn
+
+
+def test_each_pass_counts_the_record_s_windows_not_the_end_fix(sim_mission) -> None:
+    """The method tells progress of each window of each pass, to as many as the record
+    holds: the end fix's filter step is not a window (a 729-window record counts to 729)."""
+    import dataclasses
+
+    from rafostrack.config import load_config, with_overrides
+    from rafostrack.problem import FloatProblem
+    from rafostrack.run.method import track_record
+
+    sim = sim_mission.floats[0]
+    assert sim.info.has_end_fix
+    record = dataclasses.replace(sim.record, windows=sim.record.windows[:12])
+    info = dataclasses.replace(
+        sim.info, end_time=record.windows[-1].time + (record.windows[-1].time - record.windows[-2].time)
+    )
+    config = with_overrides(load_config(), filter={"particles": 100}, calibrate={"enabled": False})
+    told: list[tuple[int, int, str]] = []
+    track_record(FloatProblem(sim_mission.beacons, info, config), record, progress=lambda *a: told.append(a))
+    assert [done for done, _, _ in told] == list(range(1, 13))
+    assert {total for _, total, _ in told} == {12}

@@ -256,15 +256,16 @@ class Tracker:
         progress: Callable[[int, int], None] | None,
     ) -> Callable[[Step], None]:
         """What the filter does with each step it makes: summarise it into `filtered` (when
-        given; with `extra_cov` at the step's time), then tell `progress`."""
-        total = len(record.windows) + (self.end_fix is not None)
+        given; with `extra_cov` at the step's time), then tell `progress` of each window (the
+        end fix's step is not a window: a 729-window record counts to 729)."""
+        total = len(record.windows)
         done = iter(range(1, total + 1))
 
         def on_step(step: Step) -> None:
             if filtered is not None:
                 at = np.array([step.cloud.time], dtype="datetime64[ns]")
                 filtered.add(step, extra_cov_km2=None if extra_cov is None else extra_cov(at)[0])
-            if progress is not None:
+            if progress is not None and step.window is not None:
                 progress(next(done), total)
 
         return on_step
