@@ -6,12 +6,8 @@ BIN := $(VENV)/bin
 # $(STAMP) adds the test and Dask extras (tests, lint, benchmarks, figures).
 STAMP := $(VENV)/.installed
 RUNTIME := $(VENV)/.installed-runtime
-# After the editable install, the repository goes on sys.path too (a .pth file), so that
-# `import rafostrack` run from the folder that holds the clone (itself named rafostrack)
-# finds the package, not the clone folder as an empty namespace package: setuptools'
-# editable finder comes after the current directory. (Its own 'compat' mode does the same
-# but is deprecated, with a warning block at every install.)
-ON_PATH := $(BIN)/python -c 'import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()["purelib"], "rafostrack-checkout.pth").write_text("$(CURDIR)\n")'
+# The editable install puts the repository on sys.path with a .pth file, without a warning
+# (pyproject.toml's `package-dir` says why).
 
 .PHONY: demo test test-fast lint format bench sample clean
 
@@ -19,12 +15,10 @@ $(RUNTIME): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e .
-	$(ON_PATH)
 	touch $(RUNTIME)
 
 $(STAMP): $(RUNTIME)
 	$(BIN)/python -m pip install --quiet -e '.[test,dask]'
-	$(ON_PATH)
 	touch $(STAMP)
 
 demo: $(RUNTIME)

@@ -105,7 +105,8 @@ def write_section(path: Path, name: str, body: str, argv: Sequence[str] | None =
 
 
 def machine() -> str:
-    """The CPU model and core count, for reading timings (`unknown CPU` where /proc/cpuinfo is absent)."""
+    """The CPU model, core count and load average, for reading timings (`unknown CPU` where
+    /proc/cpuinfo is absent)."""
     model = "unknown CPU"
     cpuinfo = Path("/proc/cpuinfo")
     if cpuinfo.exists():
@@ -113,4 +114,6 @@ def machine() -> str:
             line.split(":", 1)[1].strip() for line in cpuinfo.read_text().splitlines() if line.startswith("model name")
         ]
         model = names[0] if names else model
-    return f"{model}, {os.cpu_count()} cores"
+    load = os.getloadavg() if hasattr(os, "getloadavg") else None
+    busy = "" if load is None else ", load average {:.2f} {:.2f} {:.2f} (1, 5, 15 min; this run included)".format(*load)
+    return f"{model}, {os.cpu_count()} cores{busy}"

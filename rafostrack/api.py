@@ -37,7 +37,7 @@ from typing import Any
 import pandas as pd
 
 from .config import SECTIONS
-from .errors import InputError, nearest
+from .errors import InputError, listing, nearest, nearest_id
 from .problem import FloatProblem
 from .run.method import TrackOutput
 
@@ -232,20 +232,20 @@ def _frames_float_id(arrivals: pd.DataFrame, floats: Any, float_id: str | None) 
         if float_id is None and len(named) > 1:
             raise InputError(
                 f"rafostrack.track: the arrivals DataFrame holds the arrivals of {len(named)} floats "
-                f"({_listing(named)}); expected one float's: give float_id= one of them"
+                f"({listing(named)}); expected one float's: give float_id= one of them"
             )
         if float_id is None and named:
             float_id = named[0]
         if float_id is not None and str(float_id) not in named:
             raise InputError(
                 f"rafostrack.track: float_id {float_id!r} is not in the arrivals DataFrame's float_id column"
-                f"{nearest(str(float_id), named)}; it holds {_listing(named) or 'no rows'}"
+                f"{nearest_id(str(float_id), named)}; it holds {listing(named) or 'no rows'}"
             )
         arrivals = arrivals[(ids == str(float_id)).to_numpy()].drop(columns="float_id")
     if float_id is None:
         if len(held) > 1:
             raise InputError(
-                f"rafostrack.track: the floats DataFrame holds {len(held)} floats ({_listing(held)}) and the "
+                f"rafostrack.track: the floats DataFrame holds {len(held)} floats ({listing(held)}) and the "
                 "arrivals DataFrame names none (no float_id column); expected one float's arrivals and which float "
                 f"they are: give float_id= (e.g. float_id={held[0]!r}), or pass that float's row of the floats table"
             )
@@ -257,16 +257,10 @@ def _frames_float_id(arrivals: pd.DataFrame, floats: Any, float_id: str | None) 
         return (held[0] if held else "float"), arrivals
     if table and str(float_id) not in held:
         raise InputError(
-            f"rafostrack.track: float_id {float_id!r} is not in the floats DataFrame{nearest(str(float_id), held)}; "
-            f"it holds {_listing(held) or 'no rows'}"
+            f"rafostrack.track: float_id {float_id!r} is not in the floats DataFrame{nearest_id(str(float_id), held)}; "
+            f"it holds {listing(held) or 'no rows'}"
         )
     return str(float_id), arrivals
-
-
-def _listing(names: list[str], most: int = 10) -> str:
-    """Up to `most` names, comma-separated, and how many more."""
-    more = f" and {len(names) - most} more" if len(names) > most else ""
-    return ", ".join(names[:most]) + more
 
 
 def _write_frame(frame: pd.DataFrame, path: Path) -> None:

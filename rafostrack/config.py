@@ -110,6 +110,25 @@ def _short(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def _got(value: Any, kind: type) -> str:
+    """What a value of the wrong type is, for a message: a quoted TOML string that would be
+    right without its quotes (`p_detect = "0.9"`) is named as such."""
+    if isinstance(value, str) and _reads_as(value.strip(), kind):
+        return f'the string "{value.strip()}" (remove the quotes)'
+    return _short(value)
+
+
+def _reads_as(text: str, kind: type) -> bool:
+    """Whether `text`, unquoted, is a value of `kind` (bool, int or float)."""
+    if kind is bool:
+        return text in ("true", "false")
+    try:
+        (float if kind is float else int)(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _read_toml(path: Path) -> dict[str, Any]:
     try:
         with open(path, "rb") as fh:
@@ -182,11 +201,11 @@ def check_value(section: str, key: str, value: Any, source: str) -> Any:
     if kind is bool or isinstance(value, bool):
         if not (kind is bool and isinstance(value, bool)):
             expected = "true or false" if kind is bool else f"a {kind.__name__}"
-            raise InputError(f"{where}: expected {expected}, got {_short(value)}")
+            raise InputError(f"{where}: expected {expected}, got {_got(value, kind)}")
         return value
     if kind is float:
         if not isinstance(value, int | float):
-            raise InputError(f"{where}: expected a number, got {_short(value)}")
+            raise InputError(f"{where}: expected a number, got {_got(value, float)}")
         value = float(value)
         if not math.isfinite(value):
             raise InputError(f"{where}: expected a finite number, got {_short(value)}")
@@ -194,7 +213,7 @@ def check_value(section: str, key: str, value: Any, source: str) -> Any:
         if isinstance(value, float) and value.is_integer():
             value = int(value)
         if not isinstance(value, int):
-            raise InputError(f"{where}: expected a whole number, got {_short(value)}")
+            raise InputError(f"{where}: expected a whole number, got {_got(value, int)}")
     elif kind is str and not isinstance(value, str):
         raise InputError(f"{where}: expected a string, got {_short(value)}")
     meta = spec.metadata

@@ -12,7 +12,8 @@ overview, the batch's findings) reads the kind, never the wording.
 from __future__ import annotations
 
 import difflib
-from collections.abc import Iterable
+import re
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -36,11 +37,25 @@ def nearest(name: str, choices: Iterable[str]) -> str:
     return f" (did you mean {match[0]!r}?)" if match else ""
 
 
+def nearest_id(name: str, ids: Iterable[str]) -> str:
+    """`nearest` among the `ids` that carry the same numbers as `name`: float811 is another
+    float than float767 or float812, never a typo of it."""
+    numbers = [int(n) for n in re.findall(r"\d+", name)]
+    return nearest(name, [i for i in ids if [int(n) for n in re.findall(r"\d+", i)] == numbers])
+
+
+def listing(names: Sequence[str], most: int = 10) -> str:
+    """Up to `most` names, comma-separated, and how many more."""
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
+
+
 class WarningKind(StrEnum):
     """What a warning is about: the overview counts warnings by kind (run.json's `warning_kinds`)."""
 
     METADATA = "metadata"  # a table value the arrivals contradict or cannot decide
     END_FIX = "end fix"  # the end fix far from every particle
+    SPLIT_TRACK = "split track"  # the two-filter smoother's filters held the float apart (`smoothing.split`)
     GAPS = "gaps"  # windows with no usable or active beacon
     OUTLIER_TOAS = "outlier TOAs"  # TOAs far from every particle's prediction
     LIKELIHOOD = "likelihood"  # a window's likelihood not finite

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -16,19 +19,28 @@ from rafostrack.errors import InputError
 ROOT = Path(__file__).resolve().parents[1]
 
 
+README_CHECKS = """
+import json
+seen = {"rows": len(r.track), "columns": list(r.track.columns[:4]), "windows": r.run_info["counts"]["windows"]}
+print(json.dumps({**seen, "figure": type(fig).__name__, "float_id": r2.float_id, "rows2": len(r2.track)}))
+"""
+
+
 @pytest.mark.slow
-def test_readme_example_runs(monkeypatch, capsys):
+def test_readme_example_runs_from_any_folder(tmp_path):
+    """README's Python example as a user runs it: in a fresh process, in a folder that is not
+    the clone's (its paths were relative to the clone's root: file not found elsewhere)."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     section = text[text.index("## Python API") :]
     code = re.search(r"```python\n(.*?)```", section, re.DOTALL).group(1)
-    monkeypatch.chdir(ROOT)
-    namespace: dict = {}
-    exec(compile(code, "README.md (Python API)", "exec"), namespace)
-    r, r2 = namespace["r"], namespace["r2"]
-    assert list(r.track.columns[:4]) == ["float_id", "time", "lat", "lon"] and len(r.track) == 404
-    assert r.run_info["counts"]["windows"] == 404 and isinstance(namespace["fig"], Figure)
-    assert r2.float_id == "float811" and 40 < len(r2.track) < 80
-    assert "windows," in capsys.readouterr().out
+    (tmp_path / "example.py").write_text(code + README_CHECKS, encoding="utf-8")
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    proc = subprocess.run([sys.executable, "example.py"], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    seen = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert seen["columns"] == ["float_id", "time", "lat", "lon"] and seen["rows"] == seen["windows"] == 404
+    assert seen["figure"] == "Figure" and seen["float_id"] == "float811" and 40 < seen["rows2"] < 80
+    assert "windows," in proc.stdout
 
 
 def test_files_and_frames_give_the_same_track(sim_mission_dir):
@@ -104,7 +116,7 @@ def test_which_float_the_arrivals_are(sim_mission_dir):
         "(no float_id column); expected one float's arrivals and which float they are: give float_id= "
         "(e.g. float_id='sim1'), or pass that float's row of the floats table"
     )
-    with pytest.raises(InputError, match=r"float_id 'sim3' is not in the floats DataFrame .*; it holds sim1, sim2$"):
+    with pytest.raises(InputError, match=r"float_id 'sim3' is not in the floats DataFrame; it holds sim1, sim2$"):
         rafostrack.track(arrivals, beacons=frames["beacons"], floats=floats, float_id="sim3")
     options = {"particles": 60, "smooth": False, "calibrate_enabled": False}
     both = pd.concat([arrivals.assign(float_id="sim1"), arrivals.assign(float_id="sim2")])
@@ -165,14 +177,23 @@ def test_make_demo_installs_only_the_package():
     assert "[test,dask]" in closure("test")
 
 
+def test_the_editable_install_is_a_plain_path_entry():
+    """Every `pip install -e .` printed setuptools' warning block about folders named like the
+    package: without `package-dir`, setuptools installs a meta path finder and warns. With it
+    (the flat layout said explicitly), a .pth file puts the repository on sys.path, what the
+    Makefile used to write by hand."""
+    import tomllib
+
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert setuptools["package-dir"] == {"": "."}
+    assert "purelib" not in (ROOT / "Makefile").read_text()  # no .pth file written by hand
+
+
 def test_the_api_imports_from_the_folder_that_holds_a_clone_named_rafostrack(tmp_path):
     """Run beside a clone named `rafostrack` (the folder a newcomer saves the README's
     example in), `import rafostrack` finds the installed package, not the clone folder as
     an empty namespace package (the Makefile's editable install puts the repository on
     sys.path)."""
-    import subprocess
-    import sys
-
     (tmp_path / "rafostrack").mkdir()  # what a clone looks like from its parent: no __init__.py
     done = subprocess.run(
         [sys.executable, "-c", "import rafostrack; print(callable(rafostrack.track))"],

@@ -367,6 +367,47 @@ def test_sigkill_leaves_no_partial_output_and_a_rerun_finishes(work_tree, tmp_pa
 
 
 @pytest.mark.slow
+def test_sigkill_leaves_batch_log_with_a_line_per_finished_float(work_tree, tmp_path):
+    """batch.log was written only at the end: a killed run left none. It grows as the run
+    goes: its start line, then one whole line per float finished before the kill."""
+    out = tmp_path / "out"
+    cfg = _slow_config(tmp_path)
+    args = ["batch", str(work_tree), "--out", str(out), "--jobs", "1", "--no-plots", "--config", str(cfg)]
+    proc = _start(args, tmp_path / "killed")
+
+    def processed() -> list[str]:
+        text = (out / b.LOG_NAME).read_text() if (out / b.LOG_NAME).exists() else ""
+        return [line for line in text.splitlines() if " processed in " in line]
+
+    try:
+        _wait_for(lambda: len(processed()) >= 2, 120, "two floats' lines in batch.log", proc)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    text = (out / b.LOG_NAME).read_text()
+    assert text.endswith("\n") and f"pid {proc.pid} on " in text.splitlines()[0]
+    logged = [tuple(line.split("] ", 1)[1].split(" processed")[0].rsplit("/", 1)) for line in processed()]
+    assert len(set(logged)) == len(logged) >= 2 and set(logged) <= _complete(out) != set(FLOATS)
+    assert len(_complete(out) - set(logged)) <= 1  # at most the one float finished as the run was killed
+
+
+def test_batch_log_lines_are_written_as_they_come(tmp_path):
+    """`Reporter.log_file`: the lines before it, then each line as it is logged; the file
+    holds the run's lines only (a previous run's are replaced), whole."""
+    path = tmp_path / "batch.log"
+    path.write_text("a previous run's line\n")
+    reporter = b.Reporter(io.StringIO(), tty=False)
+    reporter.log("before the lock")
+    with reporter.log_file(path):
+        assert path.read_text().endswith(" before the lock\n")
+        reporter.done(b.FloatOutcome("m1", "sim1", b.PROCESSED, "new", seconds=1.0, warnings=0))
+        assert path.read_text().splitlines()[-1].endswith(" [1/0] m1/sim1 processed in 1.0 s (new)")
+        reporter.lines.extend(["table line 1", "table line 2"])
+    reporter.log("after the run")
+    assert path.read_text() == "\n".join(reporter.lines[:-1]) + "\n" and len(reporter.lines) == 5
+
+
+@pytest.mark.slow
 def test_a_second_concurrent_run_does_not_write(work_tree, tmp_path):
     out = tmp_path / "out"
     cfg = _slow_config(tmp_path)

@@ -209,6 +209,7 @@ def test_outputs_do_not_depend_on_the_thread_count(mission_dir, tmp_path):
         ("floats.csv", "", "floats.csv: file is empty"),
         ("sim1.csv", "time,toa_s\n2010-01-02,abc\n", "sim1.csv: line 2: field 'toa_s': expected a number"),
         ("rafostrack.toml", "[model]\nclutter_rte = 1\n", "unknown key [model] clutter_rte (did you mean"),
+        ("rafostrack.toml", '[model]\np_detect = "0.9"\n', 'got the string "0.9" (remove the quotes)'),
     ],
 )
 def test_cli_input_errors_exit_2_one_line_no_traceback(sim_mission_dir, tmp_path, file, text, needle):

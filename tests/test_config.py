@@ -125,6 +125,12 @@ def test_unknown_config_key_suggests_nearest(tmp_path):
     ("text", "needle"),
     [
         ("[model]\ntoa_sigma_s = 'two'\n", "[model] toa_sigma_s: expected a number, got 'two'"),
+        (
+            '[model]\np_detect = "0.9"\n',
+            '[model] p_detect: expected a number, got the string "0.9" (remove the quotes)',
+        ),
+        ("[filter]\nparticles = '200'\n", '[filter] particles: expected a whole number, got the string "200" (remove'),
+        ('[calibrate]\nenabled = "false"\n', '[calibrate] enabled: expected true or false, got the string "false"'),
         ("[filter]\nparticles = 10.5\n", "[filter] particles: expected a whole number, got 10.5"),
         ("[filter]\nparticles = 1e12\n", "[filter] particles: must be between 2 and 10000000"),
         ("[model]\np_detect = nan\n", "[model] p_detect: expected a finite number, got nan"),

@@ -301,3 +301,25 @@ def test_validation_sections_are_stamped() -> None:
         stamp = r"_Written \d{4}-\d{2}-\d{2} at commit `[0-9a-f]+(\+dirty)?` by `python benchmarks/%s\.py[^`]*`\._"
         assert re.match(stamp % script, body.group(1)), f"the {name} section is not stamped"
         assert re.search(r"^\|(---:?\|)+$", body.group(1), re.MULTILINE), f"the {name} section has no table"
+
+
+# A timing written by hand: seconds, minutes or hours near a core count or per float.
+DURATION = r"\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)? ?(?:s|min|minutes|hours)\b"
+HAND_TIMING = re.compile(
+    rf"{DURATION}[^.;\n]{{0,30}}?(?:\bcores?\b|per (?:\S+ )?float)|\bcores?\b[^.;\n]{{0,30}}?{DURATION}|core-hours"
+)
+
+
+def test_speed_figures_come_from_the_benchmarks() -> None:
+    """The user guide's timings ("8.7-9.0 s on two cores") were hand-written, not what a user
+    sees: it points to validation.md's speed section, which the benchmark writes with the
+    machine and its load; README says how long `make test` takes and that `make test-fast` exists."""
+    for written in ("the sample float on two cores: 8.7-9.0 s", "~15-25 s per 2-year float", "~7-10 core-hours"):
+        assert HAND_TIMING.findall(written), written
+    assert not HAND_TIMING.findall("the arrivals support 90.2 s on 7 of 9 floats")
+    guide = (REPO / "docs" / "user-guide.md").read_text()
+    assert not HAND_TIMING.findall(guide), HAND_TIMING.findall(guide)
+    assert "validation.md#speed-the-2-year-sample-float-and-an-archive-float" in guide
+    assert "load average" in _load("benchmarks/report.py").machine()
+    readme = (REPO / "README.md").read_text()
+    assert re.search(r"`make test` runs the suite, about \d+ minutes on a \d-core machine; `make test-fast`", readme)

@@ -169,6 +169,34 @@ def test_float_id_missing_from_floats_csv(tmp_path):
     )
 
 
+@pytest.mark.parametrize(
+    ("ids", "named", "hint"),
+    [
+        # another float's number is no typo: float767 was suggested for float811
+        (["float767"], "float811", "; known: float767"),
+        (["float767", "float812"], "float811", "; known: float767, float812"),
+        (["Float811", "f811"], "float811", " (did you mean 'Float811'?); known: Float811, f811"),  # both are 811
+        (
+            [f"float{700 + i}" for i in range(14)],
+            "float811",
+            "; known: float700, float701, " + ", ".join(f"float{700 + i}" for i in range(2, 10)) + " and 4 more",
+        ),
+    ],
+)
+def test_float_id_missing_from_floats_csv_suggests_only_a_close_id(tmp_path, ids, named, hint):
+    mission = tmp_path / "m"
+    mission.mkdir()
+    write(mission / "beacons.csv", BEACONS)
+    rows = "".join(f"{f},2009-01-01T00:00:00Z,-57,-98,4000,3\n" for f in ids)
+    write(mission / "floats.csv", FLOATS.splitlines()[0] + "\n" + rows)
+    write(mission / f"{named}.csv", ARRIVALS)
+    result = CliRunner().invoke(main, ["track", str(mission / f"{named}.csv"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert result.stderr.strip() == (
+        f"rafostrack: error: {mission / 'floats.csv'}: no row for float_id {named!r} (the arrival file's name){hint}"
+    )
+
+
 def test_launch_after_first_window(tmp_path):
     with pytest.raises(InputError) as err:
         read_small(tmp_path, "time,toa_s\n2009-01-02,1\n2008-12-31T00:00Z,100\n")

@@ -75,7 +75,7 @@ def test_netcdf_is_a_cf_trajectory_readable_by_xarray(out):
             if name == "trajectory":
                 continue
             assert var.dims == ("obs",) and var.encoding.get("coordinates") == "time lat lon", name
-            assert "units" in var.attrs or "flag_values" in var.attrs or name == "status", name
+            assert "units" in var.attrs or "flag_values" in var.attrs, name
             assert var.attrs["long_name"]
         np.testing.assert_array_equal(ds["time"].values, track["time"].dt.tz_localize(None).to_numpy())
         np.testing.assert_allclose(ds["lat"].values, track["lat"])
@@ -162,6 +162,43 @@ def _tables(label_rows: list[tuple]) -> dict[str, pd.DataFrame]:
         "labels": _frame(label_rows, LABEL_COLUMNS, {"rank": "int64"}, ("beacon_id",)),
         "modes": pd.DataFrame(),
     }
+
+
+def _statuses(ds) -> list[str]:
+    """track.nc's `status` read back through its CF flags."""
+    meanings = dict(zip(ds["status"].attrs["flag_values"], ds["status"].attrs["flag_meanings"].split(), strict=True))
+    return [meanings[v] for v in ds["status"].values.tolist()]
+
+
+def test_netcdf_status_is_cf_flags_and_every_array_is_compressed(out):
+    """`status` was text; it is an int8 CF flag variable, and each numeric array of both files
+    is zlib-compressed (variable-length text cannot be)."""
+    import h5py
+    import xarray as xr
+
+    track = pd.read_parquet(out / "track.parquet")
+    with xr.open_dataset(out / "track.nc") as ds:
+        assert ds["status"].dtype == np.int8 and ds["status"].attrs["flag_values"].tolist() == [0, 1, 2, 3]
+        assert ds["status"].attrs["flag_meanings"] == "ok ambiguous unsupported recovered"
+        assert _statuses(ds) == track["status"].tolist()
+    for name in ("track.nc", "labels.nc"):
+        with h5py.File(out / name, "r") as f:
+            arrays = [k for k, v in f.items() if v.shape and v.dtype.kind in "biuf" and k not in ("obs", "label")]
+            assert len(arrays) >= 6 and all(f[k].compression == "gzip" for k in arrays), name
+
+
+def test_netcdf_every_status_round_trips_and_an_unknown_one_is_refused(tmp_path):
+    import xarray as xr
+
+    tables = _tables([])
+    statuses = ["recovered", "unsupported", "ambiguous"]
+    tables["track"]["status"] = statuses
+    write_estimate(tmp_path, tables, _info(), ("netcdf",), {})
+    with xr.open_dataset(tmp_path / "track.nc") as ds:
+        assert _statuses(ds) == statuses and ds["status"].values.tolist() == [3, 2, 1]
+    tables["track"]["status"] = ["ok", "lost", "ok"]
+    with pytest.raises(ValueError, match="track status 'lost' has no flag value"):
+        write_estimate(tmp_path / "bad", tables, _info(), ("netcdf",), {})
 
 
 def test_netcdf_labels_keep_missing_values_and_name_the_filtered_track(tmp_path):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import base64
 import csv
+import html
 import json
 import re
 import shutil
@@ -373,6 +374,136 @@ def test_the_map_draws_floats_needing_a_look_on_top_and_names_them():
         draw_mission_map(fig, paths, beacons, "title", background=_no_coast)
         ax = fig.axes[0]
         tracks = [line for line in ax.lines if len(line.get_xdata()) == 20]
-        assert [line.get_color() for line in tracks] == ["#1580bf", "#d62728", "#d62728"]  # ok below
+        assert [line.get_linestyle() for line in tracks] == ["-", "--", "--"]  # ok below
         legend = [t.get_text() for t in fig.legends[0].get_texts()]
         assert legend[:2] == ["ok (1)", "needs a look (2)"]
+
+
+def test_every_float_has_its_own_colour_and_its_status_a_line_style():
+    """Tangled tracks are told apart by colour; whether a float needs a look, by its dashed
+    line and the cross at its end (the legend shows the styles)."""
+    t = np.linspace(0.0, 1.0, 20)
+    paths = [FloatPath(f"f{k}", -58.0 + 0.3 * np.sin(3 * t + k), -90.0 + t, OK) for k in range(6)]
+    paths.append(FloatPath("odd", -58.0 + t, -90.0 + t, NEEDS_LOOK))
+    with figure() as fig:
+        draw_mission_map(fig, paths, None, "title", background=_no_coast)
+        ax = fig.axes[0]
+        tracks = [line for line in ax.lines if len(line.get_xdata()) == 20]
+        assert len({line.get_color() for line in tracks}) == len(paths)
+        assert [line.get_linestyle() for line in tracks] == ["-"] * 6 + ["--"]
+        assert [line.get_marker() for line in ax.lines if len(line.get_xdata()) == 1 and line.get_marker() == "X"]
+        legend = {
+            t.get_text(): h for t, h in zip(fig.legends[0].get_texts(), fig.legends[0].legend_handles, strict=True)
+        }
+        assert legend["ok (6)"].get_linestyle() == "-" and legend["needs a look (1)"].get_linestyle() == "--"
+
+
+@pytest.mark.parametrize("below_deg", [0.05, 0.1, 0.15, 0.2])
+def test_float_names_stay_off_the_beacons_names(below_deg):
+    """A float ending a little below a beacon: its name (above its end) would cover the
+    beacon's (below the triangle); it goes elsewhere, and both stay inside the map."""
+    t = np.linspace(0.0, 1.0, 10)
+    paths = [FloatPath("calm", -58.0 - below_deg - 0.5 + 0.5 * t, -90.5 + 0.5 * t)]
+    beacons = pd.DataFrame({"beacon_id": ["B1", "B2"], "lat": [-58.0, -56.0], "lon": [-90.0, -92.0]})
+    with figure() as fig:
+        draw_mission_map(fig, paths, beacons, "t", background=_no_coast)
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        ax = fig.axes[0]
+        frame = ax.get_window_extent(renderer)
+        boxes = {t.get_text(): t.get_window_extent(renderer) for t in ax.texts}
+        assert not boxes["calm"].overlaps(boxes["B1"])
+        assert all(
+            frame.x0 <= b.x0 and b.x1 <= frame.x1 and frame.y0 <= b.y0 and b.y1 <= frame.y1 for b in boxes.values()
+        )
+
+
+def _css_rule(page: str, selector: str) -> str:
+    """The declarations of the page's CSS rule for `selector` ("" when none)."""
+    style = page.split("<style>")[1].split("</style>")[0]
+    found = re.search(r"(?m)^" + re.escape(selector) + r" \{([^}]*)\}", style)
+    return found.group(1) if found else ""
+
+
+def _text(cell: str) -> str:
+    """A table cell's text as shown (tags dropped, entities read)."""
+    return html.unescape(re.sub(r"<[^>]+>", "", cell)).strip()
+
+
+def _longest_word(text: str) -> int:
+    return max((len(w) for w in text.split()), default=0)
+
+
+def _min_table_width_px(page: str) -> float:
+    """The narrowest the page's table can be laid out, roughly as a browser does: per column
+    its widest unbreakable run (a cell that must stay on one line whole, else its longest
+    word; one character where the CSS lets text break anywhere), at 0.65 em a character
+    (0.7 em for the bold headers), plus padding and border."""
+    font_px = float(re.search(r"font-size: (\d+)px", _css_rule(page, "table.overview")).group(1))
+    pad_px = float(
+        re.search(r"padding: \d+px (\d+)px", _css_rule(page, "table.overview th, table.overview td")).group(1)
+    )
+    th_nowrap = "nowrap" in _css_rule(page, "table.overview th")
+    td_anywhere = "overflow-wrap: anywhere" in _css_rule(page, "table.overview td")
+    table = page.split('<table class="overview">')[1].split("</table>")[0]
+    widths = [
+        0.7 * font_px * (len(_text(h)) if th_nowrap else _longest_word(_text(h)))
+        for h in re.findall(r"<th>(.*?)</th>", table)
+    ]
+    for row in re.findall(r"<tr class=.*?</tr>", table):
+        for k, (attrs, cell) in enumerate(re.findall(r"<td([^>]*)>(.*?)</td>", row)):
+            whole = 'class="num"' in attrs
+            chars = len(_text(cell)) if whole else 1 if td_anywhere else _longest_word(_text(cell))
+            widths[k] = max(widths[k], 0.65 * font_px * chars)
+    return sum(widths) + len(widths) * (2 * pad_px + 1) + 1
+
+
+def test_the_table_fits_a_1400_px_window_and_scrolls_in_its_box_beyond(batch_out, tmp_path):
+    """At 1400 px (less the page's margins and a scroll bar) the table needs no horizontal
+    scrolling, even with a failed float's long reason; a wider table scrolls inside its own
+    box, never widening the page."""
+    out, _ = batch_out
+    long_reason = "cannot read /data/archive/" + "a_very_long_folder_name/" * 6 + "float.csv: no such file"
+    row = FloatRow("m1", "x" * 24, failed=long_reason)
+    for page in (
+        (out / OVERVIEW_HTML).read_text(),
+        overview_html(Overview(tmp_path, judged([row], LookRules())), None),
+    ):
+        assert _min_table_width_px(page) <= 1400 - 2 * 1.5 * 14 - 2 - 16
+        box = re.search(r'<div class="([^"]+)">\s*<table class="overview">', page)
+        assert box and "</table>\n</div>" in page
+        rule = _css_rule(page, f"div.{box.group(1)}")
+        assert "max-width: 100%" in rule and re.search(r"overflow(-x)?: auto", rule)
+
+
+def test_summary_from_another_folder_finds_the_relative_beacon_table_or_says_so(archive, tmp_path, monkeypatch):
+    """`rafostrack track m1/sim1.csv --out out` run in WORK records m1/beacons.csv, relative
+    to WORK, in run.json. `summary WORK/out` run elsewhere still draws those beacons; with
+    the mission moved away it draws none and says so in one warning line."""
+    import rafostrack.batch.overview as overview_module
+
+    work, elsewhere = tmp_path / "work", tmp_path / "elsewhere"
+    shutil.copytree(archive / "m1", work / "m1")
+    elsewhere.mkdir()
+    monkeypatch.chdir(work)
+    tracked = CliRunner().invoke(main, ["track", "m1/sim1.csv", "--out", "out", "--no-plots"])
+    assert tracked.exit_code == 0, tracked.output
+    assert json.loads((work / "out" / "sim1" / "run.json").read_text())["inputs"]["beacons"]["path"] == "m1/beacons.csv"
+    drawn = []
+    original = overview_module.plot_mission_map
+    monkeypatch.setattr(
+        overview_module,
+        "plot_mission_map",
+        lambda paths, beacons, *a: drawn.append(beacons) or original(paths, beacons, *a),
+    )
+    monkeypatch.chdir(elsewhere)
+    result = _summary(work / "out")
+    assert result.exit_code == 0, result.output
+    assert drawn[-1] is not None and len(drawn[-1]) == len(pd.read_csv(work / "m1" / "beacons.csv"))
+    assert "warning" not in result.stderr
+    shutil.move(work / "m1", tmp_path / "moved")
+    result = _summary(work / "out")
+    assert result.exit_code == 0, result.output
+    assert drawn[-1] is None
+    [line] = result.stderr.splitlines()
+    assert line.startswith("rafostrack: warning: overview.png: ") and "m1/beacons.csv" in line

@@ -389,3 +389,77 @@ def test_map_title_is_inside_the_figure_and_beacon_labels_do_not_overlap(info):
         assert len(boxes) == n
         assert not [(i, j) for i in range(n) for j in range(i + 1, n) if boxes[i].overlaps(boxes[j])]
         assert ax.title.get_window_extent(renderer).y1 <= fig.bbox.height
+
+
+@pytest.mark.parametrize("days", [5, 30])
+def test_map_labels_of_sources_on_the_top_edge_stay_off_the_title(info, days):
+    """Sources north of the float are pinned to the map's top edge (as on a synthetic mission's
+    float with its sources north of it): their labels, and that of a source inside the frame
+    just below its top, stay inside the map and never overlap the title."""
+    from rafostrack.plots import track_map
+    from rafostrack.plots.base import figure
+
+    track = make_track(days)
+    north = BeaconTable(
+        beacon_id=np.array(["N1", "N2", "N3", "N4", "E1", "IN"], dtype=object),
+        lat=np.array([-53.0, -52.5, -54.0, -50.0, -58.0, float(track.lat.max()) + 0.05]),
+        lon=np.array([-97.0, -94.0, -90.0, -95.5, -60.0, float(track.lon.mean())]),
+        offset_s=np.zeros(6),
+        drift_s_per_day=np.zeros(6),
+        start=np.full(6, NAT),
+        end=np.full(6, NAT),
+    )
+    with figure() as fig:
+        track_map.draw_track(fig, track, north, info)
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        ax = fig.axes[0]
+        title, frame = ax.title.get_window_extent(renderer), ax.get_window_extent(renderer)
+        labels = [t for t in ax.texts if t.get_text() in set(north.beacon_id)]
+        assert len(labels) == len(north)
+        for text in labels:
+            box = text.get_window_extent(renderer)
+            assert not box.overlaps(title), text.get_text()
+            assert frame.y0 <= box.y0 and box.y1 <= frame.y1 and frame.x0 <= box.x0 and box.x1 <= frame.x1
+
+
+def test_arrivals_leave_out_a_beacon_never_heard(beacons, info, model):
+    """S2's predicted arrivals lie inside the window, but none of the float's TOAs is labelled
+    to it: no curve and no legend entry for it, and the legend's title says it was not heard."""
+    from matplotlib.colors import to_rgba
+
+    from rafostrack.plots.arrivals import draw_arrivals
+    from rafostrack.plots.base import figure
+
+    track = make_track(30)
+    labels = make_labels(track, beacons, info, model)
+    labels = labels[labels.beacon_id != "S2"]
+    pred = predicted_arrivals(track.time.to_numpy(), track.lat.to_numpy(), track.lon.to_numpy(), beacons, info, model)
+    assert ((pred[:, 1] > 0) & (pred[:, 1] < info.window_s)).all()  # S2 would be drawn in the window
+    s2 = to_rgba(beacon_colors(["S1", "S2", "S3", "S4"])["S2"])
+    with figure() as fig:
+        draw_arrivals(fig, labels, track, beacons, info, model)
+        ax, legend = fig.axes[0], fig.legends[0]
+        entries = [t.get_text() for t in legend.get_texts()]
+        assert not [e for e in entries if e.startswith("S2")]
+        assert {"S1 (30)", "S3 (30)"} <= set(entries)
+        assert not [line for line in ax.lines if to_rgba(line.get_color())[:3] == s2[:3]]
+        assert "not heard: S2" in legend.get_title().get_text()
+
+
+@pytest.mark.parametrize(("days", "span"), [(20, "Jan 2010"), (700, "Jan 2010 – Dec 2011")])
+def test_time_axes_are_labelled_with_the_year(beacons, info, model, days, span):
+    """The arrivals and uncertainty plots' time axes say what they are, and the months and
+    years of the data (not of the padding before its first day)."""
+    from rafostrack.plots.arrivals import draw_arrivals
+    from rafostrack.plots.base import figure
+    from rafostrack.plots.uncertainty import draw_uncertainty
+
+    track = make_track(days)
+    labels = make_labels(track, beacons, info, model)
+    for draw, args in ((draw_arrivals, (labels, track, beacons, info, model)), (draw_uncertainty, (track,))):
+        with figure() as fig:
+            draw(fig, *args)
+            fig.canvas.draw()
+            label = fig.axes[len(fig.axes) - 1 if draw is draw_uncertainty else 0].get_xlabel()
+            assert label == f"time (UTC), {span}"

@@ -22,7 +22,7 @@ file yet) is only counted.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path, PurePath
 
 import pandas as pd
@@ -128,31 +128,37 @@ def summarise_tree(out: Path, rules: LookRules | None = None) -> Overview:
 # ------------------------------------------------------------------------------ the files
 
 
-def mission_beacons(rows: Sequence[FloatRow]) -> pd.DataFrame | None:
+def mission_beacons(rows: Sequence[FloatRow]) -> tuple[pd.DataFrame | None, list[str]]:
     """`beacon_id, lat, lon` of the beacons.csv files the floats were tracked with (those that
-    can still be read), each beacon once; None when there is none."""
-    tables = []
+    can still be read), each beacon once (None when there is none); and the files that
+    cannot be read."""
+    tables, unread = [], []
     for name in dict.fromkeys(r.beacons_file for r in rows if r.beacons_file):
         try:
             table = read_beacons(Path(name))
         except (InputError, OSError):
+            unread.append(name)
             continue
         tables.append(pd.DataFrame({"beacon_id": table.beacon_id.astype(str), "lat": table.lat, "lon": table.lon}))
     if not tables:
-        return None
-    return pd.concat(tables, ignore_index=True).drop_duplicates(ignore_index=True)
+        return None, unread
+    return pd.concat(tables, ignore_index=True).drop_duplicates(ignore_index=True), unread
 
 
-def write_overview(overview: Overview, plots: bool = True) -> list[Path]:
+def write_overview(overview: Overview, plots: bool = True, notice: Callable[[str], None] | None = None) -> list[Path]:
     """overview.png (the map), overview.csv and overview.html (the map inline) in the output
     root, each atomically; their paths. Without `plots` (`--no-plots`) no map is drawn and
-    an overview.png left by an earlier run is removed (the page says so)."""
+    an overview.png left by an earlier run is removed (the page says so). `notice` is told,
+    in one line, of the beacon tables the map cannot draw (not found or not readable)."""
     out = overview.out
     png = out / OVERVIEW_PNG
     image = None
     if plots:
         paths = [FloatPath(r.float_id, r.lat, r.lon, r.look) for r in overview.rows if r.look != FAILED and len(r.lat)]
-        plot_mission_map(paths, mission_beacons(overview.rows), png, map_title(overview))
+        beacons, unread = mission_beacons(overview.rows)
+        if unread and notice is not None:
+            notice(f"{png.name}: beacons not drawn: {', '.join(unread)} (run.json's beacon table) cannot be read")
+        plot_mission_map(paths, beacons, png, map_title(overview))
         image = png.read_bytes()
     else:
         png.unlink(missing_ok=True)

@@ -33,12 +33,17 @@ def map_title(overview: Overview) -> str:
     return text + (f"; {failed} failed (not drawn)" if failed else "")
 
 
+# The table fits the window: headers wrap between words, text cells anywhere (a long path
+# too), only numbers stay on one line; wider still (a narrow window), it scrolls inside its
+# box, the page never wider than the window, the header row kept in view.
 _STYLE = """
 body { font: 14px/1.4 system-ui, sans-serif; margin: 1.5em; color: #222; }
 img.map { max-width: 100%; border: 1px solid #ccc; }
-table.overview { border-collapse: collapse; font-size: 13px; }
-table.overview th, table.overview td { border: 1px solid #ddd; padding: 3px 6px; vertical-align: top; }
-table.overview th { background: #f0f0f0; cursor: pointer; position: sticky; top: 0; white-space: nowrap; }
+div.table-box { max-width: 100%; max-height: 85vh; overflow: auto; border: 1px solid #ddd; }
+table.overview { border-collapse: collapse; font-size: 12px; width: 100%; }
+table.overview th, table.overview td { border: 1px solid #ddd; padding: 3px 5px; vertical-align: top; }
+table.overview td { overflow-wrap: anywhere; }
+table.overview th { background: #f0f0f0; cursor: pointer; position: sticky; top: 0; white-space: normal; }
 table.overview th[data-order=asc]::after { content: " \\25B2"; }
 table.overview th[data-order=desc]::after { content: " \\25BC"; }
 table.overview td.num { text-align: right; white-space: nowrap; }
@@ -190,12 +195,14 @@ column's header to sort by it, again to reverse. A float's name opens its track 
 values are as configured, not calibrated. The same table is in {_esc(OVERVIEW_CSV)}.</p>
 {image}
 {findings}
+<div class="table-box">
 <table class="overview">
 <thead><tr>{head}</tr></thead>
 <tbody>
 {body}
 </tbody>
 </table>
+</div>
 <h2>A float needs a look when</h2>
 <ul>{rules}</ul>
 <p>Shares of windows by track status (ok, ambiguous, recovered, unsupported); sd: the

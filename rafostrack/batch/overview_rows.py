@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from ..calibrate.metadata_checks import CONTRADICTED
 from ..errors import WarningKind
-from ..io.writers import csv_text
+from ..io.writers import csv_text, file_digest
 from ..plots.mission_map import OK
 from .findings import table_place, value_texts
 from .run_checks import Check, number, parse_checks
@@ -251,16 +251,31 @@ def summarise_float(mission: str, float_id: str, output: Path) -> FloatRow:
     except (OSError, ValueError, KeyError) as exc:  # pyarrow's errors are OSError / ValueError
         reason = " ".join(str(getattr(exc, "strerror", None) or exc).splitlines())
         return dataclasses.replace(row, unreadable=f"{output}: {reason}")
-    beacons = _mapping(_mapping(run.get("inputs")).get("beacons"))
     return dataclasses.replace(
         row,
         **track_stats(track),
         **label_stats(labels),
         **run_values(run, float_id),
-        beacons_file=str(beacons.get("path") or ""),
+        beacons_file=recorded_input(run, "beacons", output),
         lat=track["lat"].to_numpy(dtype=float),
         lon=track["lon"].to_numpy(dtype=float),
     )
+
+
+def recorded_input(run: Mapping[str, Any], key: str, output: Path) -> str:
+    """The path of run.json's input `key` ("" when none). A relative one is relative to the
+    folder the float was tracked from, which the output directory usually lies in: it is
+    looked for against `output` and each folder above it, then the current one, a file whose
+    digest is the recorded one first; as recorded when none is there."""
+    entry = _mapping(_mapping(run.get("inputs")).get(key))
+    text = str(entry.get("path") or "")
+    recorded = Path(text)
+    if not text or recorded.is_absolute():
+        return text
+    bases = (output, *Path(output).absolute().parents, Path.cwd())
+    found = [base / recorded for base in bases if (base / recorded).is_file()]
+    same = [p for p in found if file_digest(p) == entry.get("sha256")]
+    return str((same or found or [recorded])[0])
 
 
 def overview_csv(rows: Sequence[FloatRow]) -> str:

@@ -6,11 +6,14 @@ Guarantees:
 - On a terminal, a progress bar (`tqdm`) with the counts processed and failed; failures and
   other messages are printed above it. Otherwise (cron, a pipe) no bar and no carriage
   returns: one plain line per float, `rafostrack batch: [n/total] <mission>/<float> ...`.
-- Every message, every float's line and the traceback of any unexpected error are kept for
-  `batch.log`, each line time-stamped (UTC).
+- Every message, every float's line and the traceback of any unexpected error go to
+  `batch.log`, each line time-stamped (UTC), as they come: once the run holds OUT's lock
+  the file is emptied, given the lines so far, and each line after is appended with one
+  `os.write` on an `O_APPEND` file (no buffer to flush), so a killed run leaves whole lines,
+  one per float it finished (`Reporter.log_file`).
 - The summary table lists every float processed or failed, with its reason, and the totals
   (skipped floats are counted; all floats are listed in `batch-summary.csv`, one row each,
-  columns `SUMMARY_COLUMNS`: `summary_file.py`). `run.py` writes both files atomically at the end of the run.
+  columns `SUMMARY_COLUMNS`: `summary_file.py`), which `run.py` writes atomically at the end of the run.
 - The metadata findings (`findings.py`): one line per table value the arrivals contradict,
   printed at the end, and `metadata-findings.csv` (columns `FINDINGS_COLUMNS`; a header
   only when there is none), which `run.py` writes atomically beside `batch-summary.csv`.
@@ -21,9 +24,11 @@ Guarantees:
 
 from __future__ import annotations
 
+import contextlib
+import os
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TextIO
@@ -41,6 +46,22 @@ LOG_NAME = "batch.log"
 _BAR_FORMAT = "{percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} floats [{elapsed}<{remaining}{postfix}]"
 
 
+class LogLines(list[str]):
+    """batch.log's lines, in order; while a log file is open (`fd`), each line appended is
+    written to it at once, whole, with one `os.write` (the file is `O_APPEND`)."""
+
+    fd: int | None = None
+
+    def append(self, line: str, /) -> None:
+        super().append(line)
+        if self.fd is not None:
+            os.write(self.fd, f"{line}\n".encode())
+
+    def extend(self, lines: Iterable[str], /) -> None:
+        for line in lines:
+            self.append(line)
+
+
 class Reporter:
     """Progress and log lines. On a terminal: a progress bar with log lines above it;
     otherwise (cron) one plain line per event. Every line also goes to `lines` (batch.log)."""
@@ -48,11 +69,25 @@ class Reporter:
     def __init__(self, stream: TextIO, tty: bool):
         self.stream = stream
         self.tty = tty
-        self.lines: list[str] = []
+        self.lines = LogLines()
         self.total = 0
         self.counts = {PROCESSED: 0, FAILED: 0}
         self.started = time.monotonic()
         self._bar: tqdm | None = None
+
+    @contextlib.contextmanager
+    def log_file(self, path: Path) -> Iterator[None]:
+        """Write `lines` to `path` (batch.log) as they come: the file emptied, the lines so far
+        written, then each new line appended (`LogLines`); closed on leaving."""
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        try:
+            if self.lines:
+                os.write(fd, "".join(f"{line}\n" for line in self.lines).encode())
+            self.lines.fd = fd
+            yield
+        finally:
+            self.lines.fd = None
+            os.close(fd)
 
     def log(self, message: str, console: bool = True) -> None:
         stamp = datetime.now(UTC).isoformat(timespec="seconds")
@@ -168,7 +203,7 @@ def report_overview(
     floats that need a look (on the console when there are any)."""
     try:
         overview = build_overview(Path(out), outcomes, findings=findings)
-        write_overview(overview, plots=plots)
+        write_overview(overview, plots=plots, notice=lambda message: reporter.log(f"overview: {message}"))
     except Exception as exc:  # the floats are done; a broken overview must not hide their summary
         reporter.log(f"overview: cannot be written: {type(exc).__name__}: {' '.join(str(exc).splitlines())}")
         reporter.lines.append(traceback.format_exc().rstrip())

@@ -86,7 +86,8 @@ class MetadataCheck:
     # for a batch to pool over the floats that hear it.
     information: SourceInformation | None = None
     # Where the track could not use the arrivals' value: why, and what the user should do
-    # (the warning ends with it instead of "tracked with the arrivals' value").
+    # (the warning ends with it instead of "tracked with the arrivals' value"); for a value
+    # the table leaves empty, where the arrivals' value holds (the warning names it).
     note: str | None = None
 
     def as_json(self) -> dict[str, Any]:
@@ -104,6 +105,7 @@ class MetadataCheck:
         where = f"{self.file}: line {self.line}" if self.line is not None else self.file
         if self.given is None and self.outcome in (UNDETERMINED, ESTIMATED):
             told = "the arrivals cannot tell it" if self.outcome == UNDETERMINED else "estimated from the arrivals"
+            told += f" {self.note}" if self.note else ""
             return Notice(
                 WarningKind.METADATA,
                 f"{where}: field '{self.field}' of {self.id} is empty; {told}: "

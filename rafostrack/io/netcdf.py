@@ -29,9 +29,10 @@ has them (not on `time`, whose units the encoding writes: seconds since 1970-01-
 Missing values: floats NaN (`_FillValue = NaN`, xarray's), text `_FillValue = ""` (a
 clutter TOA's `beacon_id`: null in Parquet, NaN from xarray); integers and flags are never
 missing and carry none. Categorical columns with a fixed set of values are CF flags
-(`flag_values`, `flag_meanings`: the track's `ambiguous`); `beacon_id` stays text, since
-beacon ids are the user's own strings and CF allows in a flag meaning only letters, digits
-and `_-.+@`.
+(`flag_values`, `flag_meanings`: the track's `ambiguous`, and its `status`, int8, flag value
+i meaning `STATUSES[i]`); `beacon_id` stays text, since beacon ids are the user's own strings
+and CF allows in a flag meaning only letters, digits and `_-.+@`. Every numeric array is
+zlib-compressed (`ZLIB`); the variable-length text is not (HDF5 cannot compress it).
 """
 
 from __future__ import annotations
@@ -48,6 +49,9 @@ from .atomic import atomic_path
 from .columns import LABELS, TIME, TRACK, Column
 
 TIME_UNITS = "seconds since 1970-01-01 00:00:00"
+# track.nc's `status` as CF flags: flag value i means STATUSES[i] (`summaries.estimates.window_status`)
+STATUSES = ("ok", "ambiguous", "unsupported", "recovered")
+ZLIB = {"zlib": True, "complevel": 4}  # the encoding of every numeric array (`_compress`)
 WINDOW_DIM = "obs"  # track.nc's element dimension: one listening window each
 LABEL_DIM = "label"  # labels.nc's: one stored TOA each
 TEXT_FILL = ""  # _FillValue of text variables (missing = empty, as in the CSV tables)
@@ -106,7 +110,8 @@ def track_dataset(track: pd.DataFrame, info: FloatInfo, metadata: dict[str, Any]
             values = values.astype(np.int8)
             attrs.update(flag_values=np.array([0, 1], dtype=np.int8), flag_meanings="single_mode two_modes")
         elif name == "status":
-            values = values.astype(str)
+            values = _status_flags(values)
+            attrs.update(flag_values=np.arange(len(STATUSES), dtype=np.int8), flag_meanings=" ".join(STATUSES))
         else:
             values = values.astype(np.int32 if name == "n_signals" else np.float64)
         if name not in ("lat", "lon"):
@@ -123,7 +128,24 @@ def track_dataset(track: pd.DataFrame, info: FloatInfo, metadata: dict[str, Any]
     attrs = {**_global_attrs(info, metadata, "track"), "featureType": "trajectory"}
     ds = xr.Dataset(data, coords=coords, attrs=attrs)
     _encode_time(ds)
+    _compress(ds)
     return ds
+
+
+def _status_flags(statuses: np.ndarray) -> np.ndarray:
+    """The track's statuses as their flag values (int8, `STATUSES`); a status without one is
+    a bug upstream, not a user's mistake (ValueError)."""
+    codes = pd.Index(STATUSES).get_indexer(statuses)
+    if (codes < 0).any():
+        raise ValueError(f"track status {statuses[int(np.argmax(codes < 0))]!r} has no flag value in {STATUSES}")
+    return codes.astype(np.int8)
+
+
+def _compress(ds) -> None:
+    """zlib on every numeric array of `ds` (variable-length text cannot be compressed)."""
+    for var in ds.variables.values():
+        if var.ndim and var.dtype.kind in "biufM":
+            var.encoding.update(ZLIB)
 
 
 def window_index(label_times: np.ndarray, window_times: np.ndarray) -> np.ndarray:
@@ -189,6 +211,7 @@ def labels_dataset(
     for name, enc in encoding.items():
         ds[name].encoding.update(enc)
     _encode_time(ds)
+    _compress(ds)
     return ds
 
 

@@ -19,6 +19,7 @@ from ..domain import BeaconTable, FloatInfo
 from ..model.measurement import predicted_arrivals
 from .base import (
     CLUTTER_COLOR,
+    TIME_LABEL,
     Color,
     _alpha,
     _column,
@@ -53,13 +54,6 @@ def _predicted(
     return times, pred
 
 
-def _beacons_to_show(ids: Sequence[str], counts: dict[str, int], pred: NDArray, window_s: float) -> list[int]:
-    """Columns of beacons with a label or a predicted curve inside [0, window_s]."""
-    with np.errstate(invalid="ignore"):
-        in_window = np.asarray(((pred >= 0.0) & (pred <= window_s)).any(axis=0))
-    return [k for k, b in enumerate(ids) if counts.get(b, 0) > 0 or in_window[k]]
-
-
 def plot_arrivals(
     labels: pd.DataFrame,
     track: pd.DataFrame,
@@ -86,7 +80,7 @@ def draw_arrivals(
     clutter = np.array([b is None for b in label_ids], dtype=bool)
     counts = pd.Series(label_ids[~clutter]).value_counts().to_dict()
     ptimes, pred = _predicted(track, beacons, info, model)
-    shown = _beacons_to_show(ids, counts, pred, info.window_s)
+    shown = [k for k, b in enumerate(ids) if counts.get(b, 0) > 0]  # a beacon never heard: no curve, no entry
     ax = fig.add_subplot()
     handles: list[Line2D] = []
     marker = "_" if len(ptimes) == 1 else ""  # a one-point curve is drawn as a tick
@@ -105,17 +99,21 @@ def draw_arrivals(
     _arrivals_axes(ax, info, ltimes, ptimes)
     ax.set_title(_arrivals_title(info, label_ids))
     if handles:
-        _arrivals_legend(fig, handles)
+        _arrivals_legend(fig, handles, [b for b in ids if counts.get(b, 0) == 0])
     return fig
 
 
-def _arrivals_legend(fig: Figure, handles: list[Line2D]) -> None:
-    """Legend of beacons (with TOA counts), clutter and predicted curves, right of the axes."""
+def _arrivals_legend(fig: Figure, handles: list[Line2D], unheard: Sequence[str]) -> None:
+    """Legend of beacons (with TOA counts), clutter and predicted curves, right of the axes;
+    its title names the beacons `unheard` (up to 4, else counts them)."""
+    title = "beacon (n TOAs)"
+    if unheard:
+        title += "\nnot heard: " + (", ".join(unheard) if len(unheard) <= 4 else f"{len(unheard)} beacons")
     fig.legend(
         handles=handles,
         loc="outside right upper",
         fontsize=8,
-        title="beacon (n TOAs)",
+        title=title,
         title_fontsize=8,
         ncols=1 if len(handles) <= 22 else 2,
         frameon=False,
@@ -151,7 +149,7 @@ def _arrivals_axes(ax: Axes, info: FloatInfo, ltimes: NDArray, ptimes: NDArray) 
     else:  # nothing to place in time: show the float's deployment
         end = info.end_time if info.has_end_fix else info.launch_time + np.timedelta64(1, "D")
         ax.set_xlim(mdates.date2num(info.launch_time), mdates.date2num(end))
-    date_axis(ax.xaxis)
+    date_axis(ax.xaxis, TIME_LABEL)
 
 
 def _arrivals_title(info: FloatInfo, label_ids: NDArray[np.object_]) -> str:

@@ -8,6 +8,7 @@ half-written PNG.
 from __future__ import annotations
 
 import contextlib
+import datetime
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
@@ -30,6 +31,7 @@ DPI = 120
 KM_PER_DEG = 111.2
 SD_CIRCLES = 12  # about this many uncertainty ellipses along the track
 CLUTTER_COLOR = "0.45"
+TIME_LABEL = "time (UTC)"  # a date axis's label, before the months and years it spans (`date_axis`)
 TIME_CMAP = "viridis"
 # 20 beacon colours told apart: every two of them, and each against the clutter grey and a
 # white background, differ by at least 20 CIEDE2000 units (tab20's light/dark pairs: 12).
@@ -103,11 +105,28 @@ def date_ticks(axis: Axis, first: np.datetime64, last: np.datetime64) -> None:
     axis.set_minor_locator(matplotlib.ticker.NullLocator())
 
 
-def date_axis(axis: Axis) -> None:
-    """Concise automatic date ticks on `axis`."""
+def date_axis(axis: Axis, label: str | None = None) -> None:
+    """Concise automatic date ticks on `axis`; with `label`, the axis labelled '<label>, Jan
+    2010' (the months and years of the data drawn within its limits, set before) in place of
+    the formatter's offset text."""
     locator = mdates.AutoDateLocator()
     axis.set_major_locator(locator)
-    axis.set_major_formatter(mdates.ConciseDateFormatter(locator))
+    axis.set_major_formatter(mdates.ConciseDateFormatter(locator, show_offset=label is None))
+    if label is not None:
+        (view0, view1), (data0, data1) = sorted(axis.get_view_interval()), axis.get_data_interval()
+        first, last = max(view0, data0), min(view1, data1)
+        if not first <= last:  # nothing drawn within the limits
+            first, last = view0, view1
+        axis.set_label_text(f"{label}, {span_text(mdates.num2date(first), mdates.num2date(last))}")
+
+
+def span_text(first: datetime.datetime, last: datetime.datetime) -> str:
+    """'Jan 2010', 'Jan–Mar 2010' or 'Dec 2009 – Feb 2010': the months and years from `first` to `last`."""
+    if (first.year, first.month) == (last.year, last.month):
+        return f"{first:%b %Y}"
+    if first.year == last.year:
+        return f"{first:%b}–{last:%b %Y}"
+    return f"{first:%b %Y} – {last:%b %Y}"
 
 
 def _times(frame: pd.DataFrame) -> NDArray[np.datetime64]:

@@ -1,12 +1,15 @@
-"""`overview.png`: every float's track of an output tree on one map, coloured by whether the
-float needs a look, with the beacons.
+"""`overview.png`: every float's track of an output tree on one map, each in its own colour,
+its line style saying whether the float needs a look, with the beacons.
 
 The frame is fitted to the tracks and the beacons (`track_map.frame_of`); longitudes are
 unwrapped about the tracks' circular mean, so a mission across the dateline stays in one
-piece. The floats that need a look are drawn last (on top), in a strong colour, each named
-at its last position; the others are thin and muted, named only when there are few floats
-(`LABEL_ALL_MAX`). The coastline comes through the same seam as on `track.png`
-(`track_map.Background`, by default `context_layer.draw_context`).
+piece. Each float has its own colour (the qualitative `base.BEACON_PALETTE`, cycling beyond
+20 floats), so tangled tracks can be told apart. The floats that need a look are drawn
+last (on top), dashed and thicker, a cross at their last position, each named there; the
+others are solid, named only when there are few floats (`LABEL_ALL_MAX`). The names are
+placed once the layout is drawn, clear of the beacons and their names (`labels`). The
+coastline comes through the same seam as on `track.png` (`track_map.Background`, by
+default `context_layer.draw_context`).
 """
 
 from __future__ import annotations
@@ -25,18 +28,31 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter
 from numpy.typing import NDArray
 
-from .base import KM_PER_DEG, _note, _reference_lon, _unwrap_lon, figure, lat_text, lon_text, save_png
+from .base import (
+    KM_PER_DEG,
+    Color,
+    _note,
+    _reference_lon,
+    _unwrap_lon,
+    beacon_colors,
+    figure,
+    lat_text,
+    lon_text,
+    save_png,
+)
 from .context_layer import draw_context
-from .track_map import Background, _keep_title_inside, _label_place, frame_of
+from .labels import Label, draw_labels, marker_box
+from .track_map import Background, _keep_title_inside, frame_of
 
 NEEDS_LOOK = "needs a look"
 OK = "ok"
-# Colour and line width per status; the order is the drawing order (the last on top).
+# Line style, width and end marker per status (the colour is the float's own); the order
+# is the drawing order (the last on top).
 STATUS_STYLE: dict[str, dict[str, Any]] = {
-    OK: {"color": "#1580bf", "lw": 0.9, "alpha": 0.6},
-    NEEDS_LOOK: {"color": "#d62728", "lw": 1.6, "alpha": 0.95},
+    OK: {"ls": "-", "lw": 1.2, "alpha": 0.85, "end": None},
+    NEEDS_LOOK: {"ls": "--", "lw": 1.9, "alpha": 1.0, "end": "X"},
 }
-OTHER_STYLE: dict[str, Any] = {"color": "0.3", "lw": 1.0, "alpha": 0.8}  # a status not in STATUS_STYLE
+OTHER_STYLE: dict[str, Any] = {"ls": ":", "lw": 1.4, "alpha": 0.9, "end": None}  # a status not in STATUS_STYLE
 LABEL_ALL_MAX = 25  # up to this many floats, every track is named; beyond, those needing a look
 MAP_WIDTH = 11.0  # inches
 MAP_HEIGHTS = (4.5, 11.0)  # the least and the most, inches
@@ -106,8 +122,8 @@ def draw_mission_map(
     title: str,
     background: Background | None = None,
 ) -> Figure:
-    """The tracks coloured by status, their starts as dots, the floats' names (module
-    docstring) and the beacons (`beacon_id, lat, lon` rows) as black triangles."""
+    """The tracks each in its own colour, styled by status, their starts as dots, the floats'
+    names (module docstring) and the beacons (`beacon_id, lat, lon` rows) as black triangles."""
     layout = _layout(paths, beacons)
     ax = fig.add_subplot()
     if layout.frame is None:
@@ -116,17 +132,25 @@ def draw_mission_map(
         return fig
     _map_axes(ax, layout.frame, background)
     named = len(layout.paths) <= LABEL_ALL_MAX
-    order = [*STATUS_STYLE, *sorted({p.status for p in layout.paths} - set(STATUS_STYLE))]
-    placed: list[tuple[float, float]] = []
-    for status in order:
-        for p in (p for p in layout.paths if p.status == status):
-            _draw_path(ax, p, layout, placed, label=named or status != OK)
+    colors = beacon_colors([str(k) for k in range(len(layout.paths))])  # one per float, in order
+    names: list[Label] = []
+    for status in _statuses(layout):
+        for k, p in enumerate(layout.paths):
+            if p.status == status:
+                names += _draw_path(ax, p, layout.ref_lon, colors[str(k)], label=named or status != OK)
+    marks: list[Label] = []
     if layout.beacons is not None and len(layout.beacons):
-        _draw_beacons(ax, layout.beacons)
+        marks = _draw_beacons(ax, layout.beacons)
     _legend(fig, layout)
     ax.set_title(title)
     _keep_title_inside(fig, ax)
+    draw_labels(ax, [*marks, *names], [marker_box(ax, m.x, m.y) for m in [*marks, *names]])
     return fig
+
+
+def _statuses(layout: _Layout) -> list[str]:
+    """The statuses drawn, in drawing order: `STATUS_STYLE`'s, then any other alphabetically."""
+    return [*STATUS_STYLE, *sorted({p.status for p in layout.paths} - set(STATUS_STYLE))]
 
 
 def _beacons_near(beacons: pd.DataFrame | None, ref_lon: float) -> pd.DataFrame | None:
@@ -167,42 +191,45 @@ def _map_axes(ax: Axes, frame: Frame, background: Background | None) -> None:
     ax.grid(True, lw=0.4, alpha=0.5)
 
 
-def _draw_path(ax: Axes, p: FloatPath, layout: _Layout, placed: list[tuple[float, float]], label: bool) -> None:
-    """One track in its status's style, a dot at its first position, its name by its last
-    (where it overlaps no name already `placed`, `track_map._label_place`)."""
+def _draw_path(ax: Axes, p: FloatPath, ref_lon: float, color: Color, label: bool) -> list[Label]:
+    """One track in its colour and its status's style, a dot at its first position (and the
+    status's mark at its last); its name to write by its last position, when `label`."""
     style = STATUS_STYLE.get(p.status, OTHER_STYLE)
     ok = np.isfinite(p.lat) & np.isfinite(p.lon)
-    lat, lon = p.lat[ok], _unwrap_lon(p.lon[ok], layout.ref_lon)
+    lat, lon = p.lat[ok], _unwrap_lon(p.lon[ok], ref_lon)
     zorder = 3 if p.status == OK else 4
-    ax.plot(lon, lat, "-", color=style["color"], lw=style["lw"], alpha=style["alpha"], zorder=zorder)
-    ax.plot(lon[:1], lat[:1], "o", ms=3.5, color=style["color"], zorder=zorder)
-    if not label or layout.frame is None:
-        return
-    lat0, lat1, lon0, lon1 = layout.frame
-    fx, fy = (lon[-1] - lon0) / (lon1 - lon0), (lat[-1] - lat0) / (lat1 - lat0)
-    (dx, dy), offset, ha, va = _label_place(fx, fy, placed)
-    placed.append((fx + dx, fy + dy))
+    ax.plot(lon, lat, color=color, ls=style["ls"], lw=style["lw"], alpha=style["alpha"], zorder=zorder)
+    ax.plot(lon[:1], lat[:1], "o", ms=3.5, color=color, zorder=zorder)
+    if style["end"]:
+        ax.plot(lon[-1:], lat[-1:], style["end"], ms=7, mfc=color, mec="k", mew=0.6, zorder=zorder)
+    if not label:
+        return []
     halo = [patheffects.withStroke(linewidth=2.5, foreground="w")]
-    ax.annotate(p.name, (lon[-1], lat[-1]), xytext=offset, textcoords="offset points", ha=ha, va=va, fontsize=7,
-                color=style["color"], zorder=9, path_effects=halo, annotation_clip=True)  # fmt: skip
+    weight = "normal" if p.status == OK else "bold"
+    text_style = {"color": color, "zorder": 9, "path_effects": halo, "fontweight": weight}
+    return [Label(p.name, float(lon[-1]), float(lat[-1]), 7.0, text_style)]
 
 
-def _draw_beacons(ax: Axes, beacons: pd.DataFrame) -> None:
-    """Black triangles, each named below it in grey."""
+def _draw_beacons(ax: Axes, beacons: pd.DataFrame) -> list[Label]:
+    """Black triangles; their names, to write once the layout is drawn (grey, beside each)."""
     ax.scatter(beacons["lon"], beacons["lat"], marker="^", s=45, c="k", edgecolors="w", linewidths=0.7, zorder=5)
-    for b, x, y in zip(beacons["beacon_id"], beacons["lon"], beacons["lat"], strict=True):
-        ax.annotate(str(b), (x, y), xytext=(0, -8), textcoords="offset points", ha="center", va="top",
-                    fontsize=6, color="0.3", zorder=5, annotation_clip=True)  # fmt: skip
+    style = {"color": "0.3", "zorder": 5}
+    return [
+        Label(str(b), float(x), float(y), 6.0, style)
+        for b, x, y in zip(beacons["beacon_id"], beacons["lon"], beacons["lat"], strict=True)
+    ]
 
 
 def _legend(fig: Figure, layout: _Layout) -> None:
-    """One entry per status drawn, with its count; the start dot; the beacons."""
+    """One entry per status drawn (its line style and mark, in black), with its count; the
+    start dot; the beacons."""
     handles = []
-    for status in [*STATUS_STYLE, *sorted({p.status for p in layout.paths} - set(STATUS_STYLE))]:
+    for status in _statuses(layout):
         n = sum(p.status == status for p in layout.paths)
         if n:
-            color = STATUS_STYLE.get(status, OTHER_STYLE)["color"]
-            handles.append(Line2D([], [], color=color, lw=2.0, label=f"{status} ({n})"))
+            style = STATUS_STYLE.get(status, OTHER_STYLE)
+            handles.append(Line2D([], [], color="k", ls=style["ls"], lw=style["lw"], marker=style["end"] or "",
+                                  ms=7, mfc="0.6", mec="k", mew=0.6, label=f"{status} ({n})"))  # fmt: skip
     handles.append(Line2D([], [], ls="none", marker="o", ms=4, color="0.3", label="first position"))
     if layout.beacons is not None and len(layout.beacons):
         handles.append(Line2D([], [], ls="none", marker="^", ms=7, color="k", label="beacon"))

@@ -2,10 +2,11 @@
 
 The frame is fitted to the track, the launch and end fixes (and the truth, when drawn) plus a
 margin, not to the beacon array: beacons outside it are marked on its edge, towards where
-they are. Ticks read as degrees with hemisphere letters (105°W, 58°S). Map context
-(coastline, depth) comes through one seam: `plot_track(..., background=...)` is called once
-with the frame before anything else is drawn (`Background`); by default the coastline and,
-for a float tracked with context constraints, its depth contours (`context_layer`).
+they are, and every beacon's name is written inside the map, off the title (`labels`).
+Ticks read as degrees with hemisphere letters (105°W, 58°S). Map context (coastline, depth)
+comes through one seam: `plot_track(..., background=...)` is called once with the frame
+before anything else is drawn (`Background`); by default the coastline and, for a float
+tracked with context constraints, its depth contours (`context_layer`).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from .base import (
     save_png,
 )
 from .context_layer import draw_context, float_context
+from .labels import Label, draw_labels, marker_box
 
 # Draws map context under the data: (axes, lat_min, lat_max, lon_min, lon_max), the frame in
 # degrees as drawn (longitudes within 180° of the track's, so they may pass ±180 at the dateline).
@@ -176,9 +178,9 @@ def _edge_point(lat: float, lon: float, frame: tuple[float, float, float, float]
     return cy + 0.97 * scale * dy, cx + 0.97 * scale * dx
 
 
-def _draw_beacons(ax: Axes, beacons: BeaconTable, ref_lon: float, frame: tuple[float, float, float, float]) -> int:
+def _draw_beacons(ax: Axes, beacons: BeaconTable, frame: tuple[float, float, float, float]) -> list[Label]:
     """Beacons in the frame as black triangles, those outside as hollow ones on the frame's
-    edge towards them; every one labelled above the data. Returns how many are outside."""
+    edge towards them; their names, to write once the layout is drawn (`labels.draw_labels`)."""
     lat0, lat1, lon0, lon1 = frame
     lon = _unwrap_lon(beacons.lon, 0.5 * (lon0 + lon1))
     inside = (beacons.lat >= lat0) & (beacons.lat <= lat1) & (lon >= lon0) & (lon <= lon1)
@@ -192,49 +194,8 @@ def _draw_beacons(ax: Axes, beacons: BeaconTable, ref_lon: float, frame: tuple[f
                    label="beacon outside the frame (on its edge, towards it)")  # fmt: skip
     points = [(b, x, y) for b, x, y in zip(beacons.beacon_id[inside], lon[inside], beacons.lat[inside], strict=True)]
     points += [(b, x, y) for b, (y, x) in zip(beacons.beacon_id[~inside], edge, strict=True)]
-    placed: list[tuple[float, float]] = []
-    for b, x, y in points:
-        fx, fy = (x - lon0) / (lon1 - lon0), (y - lat0) / (lat1 - lat0)
-        (dx, dy), offset, ha, va = _label_place(fx, fy, placed)
-        placed.append((fx + dx, fy + dy))
-        ax.annotate(
-            str(b), (x, y), xytext=offset, textcoords="offset points", ha=ha, va=va, fontsize=8,
-            zorder=LABEL_ZORDER, annotation_clip=True,
-            bbox={"boxstyle": "round,pad=0.15", "fc": "w", "ec": "none", "alpha": 0.8},
-        )  # fmt: skip
-    return int((~inside).sum())
-
-
-# Where a beacon's label may go, first free first: (its centre's shift in axes fractions,
-# its offset in points, alignment). A label is about LABEL_W x LABEL_H of the axes.
-LABEL_W, LABEL_H = 0.065, 0.035
-_LABEL_PLACES = (
-    ((0.0, 0.03), (0, 7), "center", "bottom"),
-    ((0.0, -0.03), (0, -8), "center", "top"),
-    ((-0.045, 0.0), (-7, 0), "right", "center"),
-    ((0.045, 0.0), (7, 0), "left", "center"),
-    *(
-        place
-        for k in (1, 2, 3)  # then stacked further above or below
-        for place in (
-            ((0.0, 0.03 + k * LABEL_H), (0, 7 + 14 * k), "center", "bottom"),
-            ((0.0, -0.03 - k * LABEL_H), (0, -8 - 14 * k), "center", "top"),
-        )
-    ),
-)
-
-
-def _label_place(
-    fx: float, fy: float, placed: list[tuple[float, float]]
-) -> tuple[tuple[float, float], tuple[int, int], str, str]:
-    """The first of `_LABEL_PLACES` (above, below, left, right of the marker at axes
-    fractions (fx, fy), then further above or below) whose label overlaps no label `placed`
-    (their centres), else above."""
-    for shift, offset, ha, va in _LABEL_PLACES:
-        cx, cy = fx + shift[0], fy + shift[1]
-        if all(abs(cx - px) >= LABEL_W or abs(cy - py) >= LABEL_H for px, py in placed):
-            return shift, offset, ha, va
-    return _LABEL_PLACES[0]
+    style = {"zorder": LABEL_ZORDER, "bbox": {"boxstyle": "round,pad=0.15", "fc": "w", "ec": "none", "alpha": 0.8}}
+    return [Label(str(b), float(x), float(y), 8.0, style, pad_pt=0.15 * 8.0) for b, x, y in points]
 
 
 def _draw_fixes(ax: Axes, info: FloatInfo, ref_lon: float) -> None:
@@ -322,10 +283,11 @@ def draw_track(
     if truth is not None and len(truth):
         tlon = _unwrap_lon(_column(truth, "lon"), ref_lon)
         ax.plot(tlon, _column(truth, "lat"), "--", color="k", lw=1.2, zorder=4, label="truth")
-    _draw_beacons(ax, beacons, ref_lon, frame)
+    names = _draw_beacons(ax, beacons, frame)
     _draw_fixes(ax, info, ref_lon)
     _draw_scale_bar(ax, frame)
     _finish_map(fig, ax, frame, handles, map_title(info.float_id) + _span_text(times))
+    draw_labels(ax, names, [marker_box(ax, n.x, n.y) for n in names])
     return fig
 
 
@@ -425,6 +387,7 @@ def _keep_title_inside(fig: Figure, ax: Axes) -> None:
     engine = fig.get_layout_engine()
     if overflow > 0 and isinstance(engine, ConstrainedLayoutEngine):
         engine.set(rect=(0.0, 0.0, 1.0, 1.0 - (overflow + 4.0) / fig.bbox.height))
+        fig.canvas.draw()  # the layout the names are then placed in (`labels.draw_labels`)
 
 
 def _span_text(times: NDArray[np.datetime64]) -> str:

@@ -13,7 +13,7 @@ from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from ..summaries.estimates import runs_of
-from .base import _column, _float_id, _note, _times, date_axis, figure, float_name, save_png
+from .base import TIME_LABEL, _column, _float_id, _note, _times, date_axis, figure, float_name, save_png
 
 
 def plot_uncertainty(track: pd.DataFrame, path: Path) -> Path:
@@ -51,7 +51,7 @@ def draw_uncertainty(fig: Figure, track: pd.DataFrame) -> Figure:
     if len(times):
         pad = max((times.max() - times.min()) * 0.01, np.timedelta64(12, "h"))
         ax_ess.set_xlim(times.min() - pad, times.max() + pad)
-        date_axis(ax_ess.xaxis)
+        date_axis(ax_ess.xaxis, TIME_LABEL)
     else:
         for ax in (ax_sd, ax_n, ax_ess):
             ax.set_xticks([])

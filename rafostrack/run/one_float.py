@@ -21,7 +21,7 @@ import numpy as np
 from .. import __version__
 from ..config import Config, load_config
 from ..domain import ArrivalRecord, FloatInfo
-from ..errors import InputError, Notice, WarningKind, Warnings, kind_of, nearest
+from ..errors import InputError, Notice, WarningKind, Warnings, kind_of, listing, nearest_id
 from ..io import float_id_of, read_arrivals, read_beacons, read_floats
 from ..io.outdir import check_output_dir, remove_stale_siblings, staging_dir, swap_into_place
 from ..io.output_formats import write_estimate
@@ -120,7 +120,7 @@ def _float_info(floats_path: Path, inputs: TrackInputs, config: Config) -> Float
     if float_id not in floats:
         raise InputError(
             f"{floats_path}: no row for float_id {inputs.float_id!r} (the arrival file's name)"
-            f"{nearest(inputs.float_id, floats)}; known: {', '.join(sorted(floats)) or 'none'}"
+            f"{nearest_id(inputs.float_id, floats)}; known: {listing(sorted(floats)) or 'none'}"
         )
     info = floats[float_id]
     if inputs.launch is not None:

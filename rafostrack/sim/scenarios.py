@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from .. import sample_path
 from ..domain import BeaconTable, FloatInfo, NaT
 from ..model.geodesy import displace
 
@@ -24,8 +25,8 @@ ONE_DAY = np.timedelta64(86400, "s").astype("timedelta64[ns]")
 
 def sample_mission_dir() -> Path:
     """The bundled sample mission (DIMES floats 759, 767, 811 with SIMULATED arrivals;
-    its README.md says how it was made), installed with the package."""
-    return Path(str(resources.files("rafostrack").joinpath("data", "samples")))
+    its README.md says how it was made), installed with the package: `rafostrack.sample_path()`."""
+    return sample_path()
 
 
 def _day(text: str) -> np.datetime64:
