@@ -3,7 +3,8 @@
 A float needs a look (`LookRules`; each rule that applies is named in `reasons`) when it
 failed, when its outputs cannot be read, when it has no window, when its arrivals contradict
 a table value, when the end fix is far from every particle (a warning of kind `END_FIX`,
-`errors.WarningKind`: the kind its warning was made with, whatever its wording), or when a
+`errors.WarningKind`: the kind its warning was made with, whatever its wording), when its
+two filters held it apart on some windows (`SPLIT_TRACK`, `smoothing.split`), or when a
 share or the sd passes its limit: unsupported windows > 10%, ambiguous > 5%, recovered >
 2%, 95th percentile of sd_km > 20 km, clutter > 50% of the TOAs. Order (`judged`): failed,
 then needs a look (more reasons first), then ok; ties by mission and float id.
@@ -40,6 +41,7 @@ class LookRules:
             "it failed in the batch, or its outputs cannot be read, or it has no window",
             "its arrivals contradict a value of floats.csv or beacons.csv (metadata checks)",
             "its end fix is far from every particle (an 'end fix' warning)",
+            "its forward and backward filters held it apart on some windows (a 'split track' warning)",
             f"more than {self.unsupported_share_max:.0%} of its windows are unsupported (drift model only)",
             f"more than {self.ambiguous_share_max:.0%} of its windows are ambiguous (two positions)",
             f"more than {self.recovered_share_max:.0%} of its windows are recovered (the track was lost)",
@@ -60,6 +62,8 @@ class LookRules:
             reasons.append("arrivals contradict " + "; ".join(what for what, _ in row.contradicted))
         if row.warning_kinds.get(WarningKind.END_FIX):
             reasons.append("end fix far from every particle")
+        if row.warning_kinds.get(WarningKind.SPLIT_TRACK):
+            reasons.append("its two filters held it apart (a 'split track' warning)")
         limits = (("unsupported", self.unsupported_share_max), ("ambiguous", self.ambiguous_share_max),
                   ("recovered", self.recovered_share_max))  # fmt: skip
         for status, limit in limits:

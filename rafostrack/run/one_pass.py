@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from ..config import AmbiguityConfig, Config
 from ..context.floats import context_factors
 from ..domain import ArrivalRecord, Cloud, FloatInfo, Particles, PositionFix
+from ..errors import Notice
 from ..filtering.filter import FilterResult, FilterSettings, ParticleFilter, Step, float_rng, observations
 from ..filtering.guided import Guide
 from ..filtering.recovery import RecoverySettings
@@ -33,6 +34,7 @@ from ..likelihoods import (
 from ..motion import ClockWalk, JumpMixture, MotionModel, motion_from_config
 from ..problem import FloatProblem
 from ..smoothing.ffbsm import Smoothed, column_points, smooth
+from ..smoothing.split import Split, split_of, split_warning
 from ..smoothing.two_filter import JOIN_COLUMNS, forward_view, two_filter_smooth
 from ..summaries.estimates import Estimate, EstimateBuilder, Regions
 from .forked import Forked
@@ -229,13 +231,13 @@ class Tracker:
             filter_s = time.perf_counter() - started
             started = time.perf_counter()
             back = backward.result()
-        estimate = self._smoothed_estimate(run, back, extra_cov)
+        estimate, split = self._smoothed_estimate(run, back, extra_cov)
         seconds = Seconds(filter_s=filter_s, smoother_s=time.perf_counter() - started)
         return PassResult(
             estimate,
             filtered.result() if also_filtered else None,
             _counts(run),
-            tuple(run.warnings),
+            (*run.warnings, *([split] if split is not None else [])),
             "two_filter" if two_filter else "ffbsm",
             seconds,
         )
@@ -275,13 +277,14 @@ class Tracker:
         run: FilterResult,
         back: FilterResult | None,
         extra_cov: NuisanceCov | None,
-    ) -> Estimate:
+    ) -> tuple[Estimate, Notice | None]:
         """The smoothed estimate of a kept run: FFBSm on the forward filter's clouds, or, given
         the backward filter's run `back` (`_joins_two_filters`), both filters joined
-        (`rafostrack.smoothing.two_filter`). Each window is joined and summarised on its own:
-        the later half of the steps beside the earlier half where a core is idle
-        (`run.forked`), the same bits."""
+        (`rafostrack.smoothing.two_filter`), with the warning of the windows they held apart
+        (`smoothing.split`). Each window is joined and summarised on its own: the later half
+        of the steps beside the earlier half where a core is idle (`run.forked`), the same bits."""
         steps = run.steps
+        warning = None
         if back is None:
             smoothed = smooth([s.cloud for s in steps], self.motion, max_columns=self.smoothing.ffbsm_columns)
 
@@ -289,17 +292,19 @@ class Tracker:
                 return self._summarised([steps[k] for k in among], smoothed.part(among), extra_cov)
         else:
             steps, inputs = self._join_inputs(run, back)
+            splits = [split_of(f, b) for f, b in zip(inputs[0][1:], inputs[2][:-1], strict=True)]
+            warning = split_warning(np.array([s.cloud.time for s in steps]), splits)
 
             def part(among: range) -> EstimateBuilder:
                 clouds, smoothed = two_filter_smooth(*inputs, self.motion, windows=among)
                 joined = [dataclasses.replace(steps[k], cloud=c) for k, c in zip(among, clouds, strict=True)]
-                return self._summarised(joined, smoothed, extra_cov)
+                return self._summarised(joined, smoothed, extra_cov, [splits[k] for k in among])
 
         half, count = len(steps) // 2, len(steps)
         with Forked(lambda: part(range(half, count)).rows(), fork=half > 0) as later:
             builder = part(range(half))
             builder.extend(later.result())
-        return builder.result()
+        return builder.result(), warning
 
     def _join_inputs(
         self, run: FilterResult, back: FilterResult
@@ -319,14 +324,16 @@ class Tracker:
         steps: list[Step],
         smoothed: Smoothed,
         extra_cov: NuisanceCov | None,
+        splits: list[Split | None] | None = None,
     ) -> EstimateBuilder:
         """`steps` summarised under their `smoothed` weights, labels from the smoothed
         clouds; each window's position covariance with the smoother's kernel covariance and
-        `extra_cov` added."""
+        `extra_cov` added; `splits`: the windows the two filters held apart."""
         times = np.array([s.cloud.time for s in steps], dtype="datetime64[ns]")
         nuisance = extra_cov(times) if extra_cov is not None else np.zeros((len(times), 2, 2))
         kernels = np.array(smoothed.kernel_cov_km2).reshape(-1, 2, 2)
-        return self._builder("smoothed").add_steps(steps, smoothed, self.arrivals.label_probs, nuisance + kernels)
+        builder = self._builder("smoothed")
+        return builder.add_steps(steps, smoothed, self.arrivals.label_probs, nuisance + kernels, splits)
 
     def _builder(self, kind: str) -> EstimateBuilder:
         """An empty estimate of this float, `kind` "filtered" or "smoothed"."""

@@ -20,7 +20,8 @@ from ..config import AmbiguityConfig
 from ..domain import Cloud, Particles, Window
 from ..filtering.filter import Step
 from ..smoothing.ffbsm import Smoothed
-from .posterior import Modes, two_modes
+from ..smoothing.split import Split, sides
+from .posterior import Gaussian2D, Modes, summarise, two_modes
 
 TRACK_COLUMNS = (
     "float_id",
@@ -116,17 +117,20 @@ class EstimateBuilder:
         weights: NDArray | None = None,
         label_probs: LabelProbs | None = None,
         extra_cov_km2: NDArray | None = None,
+        split: Split | None = None,
     ) -> None:
         """Summarise `step` under `weights` (default: its filter weights). Labels come from
         the step's filtered marginals, or from `label_probs` under the given weights;
         `extra_cov_km2` (2, 2) is added to every position's covariance (a regularised
-        smoother's kernel, the calibration's undetermined nuisances)."""
+        smoother's kernel, the calibration's undetermined nuisances). A `split` window (the
+        two-filter smoother's filters apart, `smoothing.split`) is ambiguous: its modes are
+        the particles nearer each filter's mean, its covariance widened to cover both."""
         window = step.window
         if window is None:  # a position fix: an observation, not an output row
             return
         cloud = step.cloud
         w = cloud.weights if weights is None else weights
-        modes = self._modes_of(cloud, w, extra_cov_km2)
+        modes = self._modes_of(cloud, w, extra_cov_km2, split)
         self.window_ess.append(step.ess)
         position = modes.position
         smaj, smin, angle = position.ellipse()
@@ -161,17 +165,20 @@ class EstimateBuilder:
         smoothed: Smoothed | None = None,
         label_probs: LabelProbs | None = None,
         extra_cov_km2: NDArray | None = None,
+        splits: Sequence[Split | None] | None = None,
     ) -> EstimateBuilder:
         """Summarise every step (`add`): under its filter weights, or under the `smoothed`
         weights (one array per step) with labels from `label_probs`; `extra_cov_km2` (one
-        (2, 2) per step) widens the covariances. Returns the builder."""
+        (2, 2) per step) widens the covariances; `splits` (one per step, smoothed only):
+        the windows whose filters held the float apart. Returns the builder."""
         extra = [None] * len(steps) if extra_cov_km2 is None else list(extra_cov_km2)
         if smoothed is None:
             for step, cov in zip(steps, extra, strict=True):
                 self.add(step, extra_cov_km2=cov)
         else:
-            for step, weights, cov in zip(steps, smoothed.weights, extra, strict=True):
-                self.add(step, weights, label_probs, cov)
+            apart = [None] * len(steps) if splits is None else list(splits)
+            for step, weights, cov, split in zip(steps, smoothed.weights, extra, apart, strict=True):
+                self.add(step, weights, label_probs, cov, split)
         return self
 
     def rows(self) -> EstimateRows:
@@ -186,10 +193,13 @@ class EstimateBuilder:
         self._modes.extend(rows.modes)
         self.window_ess.extend(rows.window_ess)
 
-    def _modes_of(self, cloud: Cloud, weights: NDArray, extra_cov_km2: NDArray | None) -> Modes:
+    def _modes_of(self, cloud: Cloud, weights: NDArray, extra_cov_km2: NDArray | None, split: Split | None) -> Modes:
         """The cloud's two-mode summary under `weights` (`posterior.two_modes`), by regions
-        when the context parts them."""
+        when the context parts them; of a split window, by the filter each particle is
+        nearer, ambiguous, its covariance widened by the split's spread (`add`)."""
         amb = self.ambiguity
+        if split is not None:
+            return split_modes(cloud, weights, np.zeros((2, 2)) if extra_cov_km2 is None else extra_cov_km2, split)
         return two_modes(
             cloud.lat,
             cloud.lon,
@@ -208,6 +218,28 @@ class EstimateBuilder:
             labels=_frame(self._labels, LABEL_COLUMNS, {"rank": "int64"}, ("beacon_id",)),
             modes=_frame(self._modes, MODE_COLUMNS, {"mode": "int64"}),
         )
+
+
+def split_modes(cloud: Cloud, weights: NDArray, extra_cov_km2: NDArray, split: Split) -> Modes:
+    """A split window's two modes (`smoothing.split`): the particles nearer each filter's
+    mean, the heavier first (where the join put no weight near a filter's mean, that mode is
+    the filter's mean itself, of unknown spread); the whole cloud's covariance widened by
+    the split's spread."""
+    side = sides(cloud, split)
+    parts = []
+    for s, (lat, lon) in ((0, split.forward), (1, split.backward)):
+        mine = side == s
+        mass = float(weights[mine].sum())
+        if mass > 0:
+            g = summarise(cloud.lat[mine], cloud.lon[mine], weights[mine])
+            parts.append((mass, Gaussian2D(g.lat, g.lon, g.cov_km2 + extra_cov_km2)))
+        else:
+            parts.append((0.0, Gaussian2D(lat, lon, np.full((2, 2), np.nan))))
+    (w1, first), (w2, second) = sorted(parts, key=lambda part: -part[0])
+    whole = summarise(cloud.lat, cloud.lon, weights)
+    whole = Gaussian2D(whole.lat, whole.lon, whole.cov_km2 + extra_cov_km2 + split.spread_km2)
+    total = w1 + w2
+    return Modes(whole, first, second, w1 / total, w2 / total, split.distance_km, True)
 
 
 def _window_label_probs(
