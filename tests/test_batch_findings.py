@@ -494,7 +494,9 @@ def archive(tmp_path_factory) -> Path:
 
 
 def _batch(root: Path, out: Path):
-    return CliRunner().invoke(main, ["batch", str(root), "--out", str(out), "--no-plots", "--jobs", "1"])
+    return CliRunner().invoke(
+        main, ["batch", str(root), "--out", str(out), "--no-plots", "--jobs", "1", "--no-array-fit"]
+    )
 
 
 def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive, tmp_path, atomic_writes):

@@ -29,6 +29,7 @@ from rafostrack.calibrate.metadata_checks import (
     warnings_of,
     with_position_alternative,
 )
+from rafostrack.calibrate.release import FIX_KEPT_BEYOND_KM, FIX_KEPT_NOTE
 from rafostrack.calibrate.source_scan import schedule_candidates
 from rafostrack.calibrate.window_check import (
     MIN_LATE_TOAS,
@@ -414,6 +415,23 @@ def test_missing_end_clock_offset_is_estimated_from_the_arrivals(simulated):
     assert warning.startswith("floats.csv: line 2: field 'clock_offset_end_s' of sim1 is empty; estimated")
 
 
+def test_missing_end_clock_offset_without_an_end_fix_is_estimated_at_the_last_window_and_said(simulated):
+    """No end fix and no end clock offset: nothing was checked and nothing said, though the
+    clock's drift is fitted; now the clock at the last window is the check, with one warning."""
+    no_end = {"clock_offset_end_s": np.nan, "end_lat": np.nan, "end_lon": np.nan}
+    calibration, checks = _checked(simulated, no_end)
+    end = checks[(simulated[3].float_id, "clock_offset_end_s")]
+    assert end.outcome == ESTIMATED and end.given is None and end.used == end.supported
+    last = simulated[1].windows[-1].time
+    assert abs(end.supported - float(simulated[3].clock_offset_s(last))) < 1.5  # the clock's drift, recovered
+    (warning,) = warnings_of(calibration.checks)
+    stamp = np.datetime_as_string(last.astype("datetime64[s]"))
+    assert warning.startswith(
+        f"floats.csv: line 2: field 'clock_offset_end_s' of sim1 is empty; estimated from the arrivals at {stamp}Z, "
+        "the last window the arrivals label surely (there is no end fix): "
+    )
+
+
 @pytest.mark.parametrize(
     ("info_changes", "field", "given"),
     [
@@ -466,6 +484,24 @@ def test_a_wrong_end_fix_is_named_and_not_used(simulated):
     (warning,) = warnings_of(calibration.checks)
     assert warning.startswith(f"floats.csv: line 2: field 'end_fix' of {info.float_id}: given {float(lat):.3f}")
     assert not calibration.info.has_end_fix
+
+
+@pytest.mark.parametrize("fix", ["launch", "end"])
+def test_a_fix_the_arrivals_put_far_away_is_kept_and_named_with_the_distance(simulated, fix):
+    """A GPS fix is data: one 85 km from where the arrivals put it is named with that
+    distance and a note that the track or the tables are wrong, and the next pass tracks
+    with it as given (`release.FIX_KEPT_BEYOND_KM`); nearer, it is released (above)."""
+    info = simulated[3]
+    lat, lon = displace(np.array(getattr(info, f"{fix}_lat")), np.array(getattr(info, f"{fix}_lon")), 60.0, -60.0)
+    calibration, checks = _checked(simulated, {f"{fix}_lat": float(lat), f"{fix}_lon": float(lon)})
+    check = checks[(info.float_id, f"{fix}_fix")]
+    assert check.outcome == CONTRADICTED and check.supported > FIX_KEPT_BEYOND_KM and check.used == check.given
+    warning = next(w for w in warnings_of(calibration.checks) if f"field '{fix}_fix'" in w)
+    assert f"{check.supported:.4g} km away" in warning and warning.endswith(FIX_KEPT_NOTE)
+    assert (getattr(calibration.info, f"{fix}_lat"), getattr(calibration.info, f"{fix}_lon")) == (
+        float(lat),
+        float(lon),
+    )
 
 
 @pytest.mark.parametrize(("field", "wrong"), [("offset_s", 25.0), ("drift_s_per_day", 0.1)])

@@ -24,12 +24,11 @@ comments and line ends; a column the table lacks is added, empty on the other ro
 
 from __future__ import annotations
 
-import csv
-import io
 from collections.abc import Callable, Sequence
 from pathlib import Path, PurePath
 
 from ..calibrate.metadata_checks import CONTRADICTED
+from ..io.table_text import NotTheRow, with_cells
 from .findings import Finding, Pooled, table_place
 
 SUPPORTED_NAME = "beacons-supported.csv"
@@ -98,36 +97,12 @@ def supported_table(text: str, findings: Sequence[Finding]) -> str:
     """`text` (a beacons.csv) with each finding's cells (`supported_cells`) in the row of
     its line; ValueError when that line is not the finding's source's row (the table
     changed since the floats were tracked)."""
-    lines = text.splitlines(keepends=True)
-    header = _fields(lines[0]) if lines else []
-    for finding in findings:
-        at = (finding.line or 0) - 1
-        row = _fields(lines[at]) if 0 < at < len(lines) else []
-        if (
-            "beacon_id" not in header
-            or header.index("beacon_id") >= len(row)
-            or row[header.index("beacon_id")] != finding.id
-        ):
-            raise ValueError(f"{table_place(finding.file, finding.line)} is not the row of source {finding.id}")
-        for column, cell in supported_cells(finding).items():
-            if column not in header:
-                header.append(column)
-            row += [""] * (len(header) - len(row))
-            row[header.index(column)] = cell
-        lines[at] = _line(row, lines[at])
-    lines[0] = _line(header, lines[0])
-    return "".join(lines)
-
-
-def _fields(line: str) -> list[str]:
-    return [cell.strip() for cell in next(csv.reader([line.rstrip("\r\n")]), [])]
-
-
-def _line(fields: list[str], original: str) -> str:
-    """`fields` as one CSV line with `original`'s line end."""
-    out = io.StringIO()
-    csv.writer(out, lineterminator="").writerow(fields)
-    return out.getvalue() + original[len(original.rstrip("\r\n")) :]
+    edits = [((f.line or 0), f.id, supported_cells(f)) for f in findings]
+    try:
+        return with_cells(text, edits)
+    except NotTheRow as error:
+        wrong = findings[error.index]
+        raise ValueError(f"{table_place(wrong.file, wrong.line)} is not the row of source {wrong.id}") from None
 
 
 def write_supported_tables(

@@ -56,7 +56,12 @@ def process_float(task: FloatTask) -> FloatOutcome:
     try:
         if staging.exists():
             shutil.rmtree(staging)
-        inputs = TrackInputs(float_path=task.float_path, config_files=task.config_files, overrides=task.overrides)
+        inputs = TrackInputs(
+            float_path=task.float_path,
+            beacons_path=task.beacons_path,
+            config_files=task.config_files,
+            overrides=task.overrides,
+        )
         with kernel_threads(1):  # one float per core
             result = track_float(inputs, staging, plots=task.plots)
         built = Path(result.out_dir)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,6 +54,7 @@ class FloatTask:
     why: str  # why it is (re)processed: "new", "float file changed", "forced", ...
     lock_info_path: Path  # OUT/.rafostrack-batch.lock.json: names the run holding OUT's lock
     run_id: str  # this run's id: a worker installs outputs only while the lock info names it
+    beacons_path: Path | None = None  # the table tracked with, when not the mission's beacons.csv
 
 
 @dataclass
@@ -145,6 +146,7 @@ class _Batch:
     plots: bool
     force: bool
     run_id: str
+    beacons_of: Mapping[str, Path]
 
 
 def plan(
@@ -156,14 +158,17 @@ def plan(
     plots: bool = True,
     force: bool = False,
     run_id: str = "",
+    beacons_of: Mapping[str, Path] | None = None,
 ) -> tuple[list[FloatTask], list[FloatOutcome]]:
     """Split every float into work to do (tasks) and outcomes known now (skipped, or failed
-    before running: unreadable floats.csv, bad mission config, missing arrival file)."""
-    batch = _Batch(Path(out).resolve(), tuple(config_files), overrides or {}, plots, force, run_id)
+    before running: unreadable floats.csv, bad mission config, missing arrival file).
+    `beacons_of`: per mission name, the table its floats are tracked with instead of its
+    beacons.csv (the mission's calibrated array); its bytes are in the floats' keys."""
+    batch = _Batch(Path(out).resolve(), tuple(config_files), overrides or {}, plots, force, run_id, beacons_of or {})
     tasks: list[FloatTask] = []
     known: list[FloatOutcome] = []
     for mission in missions:
-        beacons_sha, beacons_error = _beacons_digest(mission)
+        beacons_sha, beacons_error = _beacons_digest(batch.beacons_of.get(mission.name, mission.path / "beacons.csv"))
         for float_id, row in sorted(mission.rows.items()):
             decided = _plan_float(mission, float_id, row, beacons_sha, beacons_error, batch)
             if isinstance(decided, FloatTask):
@@ -173,12 +178,12 @@ def plan(
     return tasks, known
 
 
-def _beacons_digest(mission: Mission) -> tuple[str, str]:
-    """The SHA-256 of the mission's beacons.csv and "", or "" and why it cannot be read."""
+def _beacons_digest(path: Path) -> tuple[str, str]:
+    """The SHA-256 of a mission's beacon table and "", or "" and why it cannot be read."""
     try:
-        return file_digest(mission.path / "beacons.csv"), ""
+        return file_digest(path), ""
     except OSError as exc:
-        return "", f"{mission.path / 'beacons.csv'}: cannot read: {exc.strerror or exc}"
+        return "", f"{path}: cannot read: {exc.strerror or exc}"
 
 
 def _plan_float(
@@ -226,6 +231,7 @@ def _plan_float(
         why=why,
         lock_info_path=batch.out / LOCK_INFO_NAME,
         run_id=batch.run_id,
+        beacons_path=batch.beacons_of.get(mission.name),
     )
 
 

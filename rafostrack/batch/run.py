@@ -9,12 +9,14 @@ Guarantees:
   temporary directories and files a killed run left in OUT are removed, then the floats are
   planned and run, then `batch-summary.csv`, `metadata-findings.csv`, each mission's
   `beacons-supported.csv` (`corrections.py`), the mission overview (`overview.html`,
-  `overview.csv`, `overview.png`) and `batch.log` are written atomically.
+  `overview.csv`, `overview.png`) are written atomically; `batch.log` is written as the run
+  goes, one whole line at a time (`report.Reporter.log_file`).
 - The result's exit code is 0 when no float failed, 1 when some did.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import shutil
@@ -30,7 +32,8 @@ from .. import __version__
 from ..config import load_config
 from ..errors import InputError
 from ..io.outdir import SIBLING
-from .corrections import write_supported_tables
+from .array_rounds import MAX_ROUNDS, calibrated_tables, fit_mission, replaced, round_line
+from .corrections import SUPPORTED_NAME, write_supported_tables
 from .discover import Mission, discover
 from .findings import findings_csv
 from .lock import BatchLock
@@ -78,6 +81,7 @@ class BatchOptions:
     config_files: tuple[Path, ...]
     overrides: dict[str, dict[str, Any]]
     plots: bool
+    array_fit: bool = True
 
 
 def run_batch(
@@ -90,6 +94,7 @@ def run_batch(
     config_file: Path | None = None,
     overrides: dict[str, dict[str, Any]] | None = None,
     plots: bool = True,
+    array_fit: bool = True,
     stream: TextIO | None = None,
     tty: bool | None = None,
 ) -> BatchResult:
@@ -110,6 +115,7 @@ def run_batch(
         config_files=(Path(config_file).resolve(),) if config_file is not None else (),
         overrides=overrides or {},
         plots=plots,
+        array_fit=array_fit,
     )
     load_config(options.config_files, options.overrides)  # a bad --config or flag: exit 2
     missions = discover(options.roots, exclude=options.out)
@@ -122,7 +128,7 @@ def run_batch(
     try:
         options.out.mkdir(parents=True, exist_ok=True)
         reporter = Reporter(stream, tty)
-        with BatchLock(options.out, reporter.log) as lock:
+        with BatchLock(options.out, reporter.log) as lock, reporter.log_file(options.out / LOG_NAME):
             outcomes, table = _run_locked(options, missions, lock, reporter, client)
     finally:
         if client is not None:
@@ -143,28 +149,84 @@ def _run_locked(
         console=False,
     )
     clean_stale(out, missions, reporter.log)
-    tasks, known = _plan_floats(options, missions, lock, reporter, client)
+    tables = calibrated_tables(missions, out) if options.array_fit else {}
+    tasks, known = _plan_floats(options, missions, lock, reporter, client, tables)
+    outcomes = known + _track(tasks, options, reporter, client)
+    if options.array_fit:
+        outcomes = _array_rounds(options, missions, lock, reporter, client, outcomes)
+    outcomes.sort(key=lambda o: (o.mission, o.float_id))
+    return outcomes, _write_reports(options, missions, reporter, outcomes, started)
+
+
+def _track(tasks: list[FloatTask], options: BatchOptions, reporter: Reporter, client: Any) -> list[FloatOutcome]:
+    """Run the tasks (local worker processes or Dask), each outcome reported as it comes."""
+    outcomes = []
     reporter.start(len(tasks))
-    outcomes = list(known)
     try:
         if client is not None:
             runner = run_dask(tasks, client)
         else:
-            runner = run_local(tasks, options.jobs, on_stderr=lambda text: _log_worker_stderr(reporter, text, out))
+            runner = run_local(
+                tasks, options.jobs, on_stderr=lambda text: _log_worker_stderr(reporter, text, options.out)
+            )
         for outcome in runner:
             outcomes.append(outcome)
             reporter.done(outcome)
     finally:
         reporter.finish()
-    outcomes.sort(key=lambda o: (o.mission, o.float_id))
-    return outcomes, _write_reports(options, missions, reporter, outcomes, started)
+    return outcomes
+
+
+def _array_rounds(
+    options: BatchOptions,
+    missions: list[Mission],
+    lock: BatchLock,
+    reporter: Reporter,
+    client: Any,
+    outcomes: list[FloatOutcome],
+) -> list[FloatOutcome]:
+    """Fit each mission's array and track its floats again with it, until the tables settle
+    (`array_rounds`); the outcomes with each retracked float's latest."""
+    for round_ in range(1, MAX_ROUNDS + 1):
+        fitted, tables = [], {}
+        for mission in missions:
+            result = fit_mission(mission, options.out, options.config_files, options.overrides, options.plots, round_)
+            if result is None:
+                continue
+            reporter.log(round_line(result, round_))
+            fitted.append(mission)
+            if result.calibrated is not None:
+                tables[mission.name] = result.calibrated
+        if round_ == MAX_ROUNDS or not fitted:
+            break
+        tasks, _ = plan(
+            fitted,
+            options.out,
+            config_files=options.config_files,
+            overrides=options.overrides,
+            plots=options.plots,
+            run_id=lock.run_id,
+            beacons_of=tables,
+        )
+        if not tasks:
+            break
+        reporter.log(f"round {round_ + 1}: tracking {len(tasks)} float(s) again with their mission's array")
+        why = f"round {round_ + 1}: tracked with the mission's array"
+        tasks = [dataclasses.replace(task, why=why) for task in tasks]
+        outcomes = replaced(outcomes, _track(tasks, options, reporter, client))
+    return outcomes
 
 
 def _plan_floats(
-    options: BatchOptions, missions: list[Mission], lock: BatchLock, reporter: Reporter, client: Any
+    options: BatchOptions,
+    missions: list[Mission],
+    lock: BatchLock,
+    reporter: Reporter,
+    client: Any,
+    tables: dict[str, Path],
 ) -> tuple[list[FloatTask], list[FloatOutcome]]:
     """The floats to run and those known without running (skipped, or failed before
-    running), each logged."""
+    running), each logged; `tables`: the calibrated table a mission's floats are tracked with."""
     for mission in missions:
         if mission.orphans:
             names = ", ".join(f"{f}.csv" for f in mission.orphans)
@@ -177,6 +239,7 @@ def _plan_floats(
         plots=options.plots,
         force=options.force,
         run_id=lock.run_id,
+        beacons_of=tables,
     )
     skipped = sum(o.status == SKIPPED for o in known)
     if not tasks:  # nothing to run: no worker starts
@@ -199,7 +262,7 @@ def _write_reports(
     options: BatchOptions, missions: list[Mission], reporter: Reporter, outcomes: list[FloatOutcome], started: float
 ) -> str:
     """The run's reports in OUT (the summary, the findings, the supported tables, the
-    overview, batch.log, in this order); returns the summary table to print (the run's
+    overview, in this order; batch.log's last lines); returns the summary table to print (the run's
     seconds counted from `started`, a `time.monotonic()`)."""
     from ..io.atomic import write_text_atomic
 
@@ -209,9 +272,12 @@ def _write_reports(
     reporter.lines.extend(table.splitlines())
     write_text_atomic(out / SUMMARY_NAME, summary_csv(outcomes))
     write_text_atomic(out / FINDINGS_NAME, findings_csv(findings))
-    write_supported_tables(findings, {m.name: m.path / "beacons.csv" for m in missions}, out, reporter.log)
+    if options.array_fit:  # the mission's array fit decides the table (beacons-calibrated.csv)
+        for mission in missions:
+            (out / mission.name / SUPPORTED_NAME).unlink(missing_ok=True)
+    else:
+        write_supported_tables(findings, {m.name: m.path / "beacons.csv" for m in missions}, out, reporter.log)
     report_overview(reporter, outcomes, out, findings, plots=options.plots)
-    write_text_atomic(out / LOG_NAME, "\n".join(reporter.lines) + "\n")
     return table
 
 

@@ -40,9 +40,9 @@ from ..summaries.estimates import Estimate
 from . import kalman
 from .association import fit_association
 from .detection import fit_detection, heard_nowhere
-from .metadata_checks import CONTRADICTED, MetadataCheck, timing_checks, z_of
-from .noise import direct_probability, fit_multipath
-from .release import Key, key_of, released_problem, used, with_supported_fixes
+from .metadata_checks import MetadataCheck, timing_checks, z_of
+from .noise import MultipathEM
+from .release import Key, key_of, releasable, released_problem, used, with_supported_fixes
 from .timing_problem import (
     MIN_ARRIVALS as MIN_ARRIVALS,
 )
@@ -163,21 +163,6 @@ class _DetectionFit:
     heard_nowhere: list[str]
 
 
-class _MultipathEM:
-    """The arrivals' direct-path weights for `kalman.fit`, multipath refitted by EM at each call."""
-
-    def __init__(self, model: m.ModelConfig):
-        self.model = model
-
-    def weight_of(self, residual_s: NDArray, toa_sigma_s: float) -> NDArray:
-        """P(direct) of each residual, under multipath fitted to them (`noise.fit_multipath`)."""
-        eps, tau = fit_multipath(residual_s, toa_sigma_s, self.model)
-        self.model = dataclasses.replace(
-            self.model, toa_sigma_s=toa_sigma_s, multipath_fraction=eps, multipath_delay_s=tau
-        )
-        return direct_probability(residual_s, self.model)
-
-
 def calibrate(
     estimate: Estimate, record: ArrivalRecord, problem: FloatProblem, start: kalman.Hyper | None = None
 ) -> Calibration | None:
@@ -227,7 +212,7 @@ def _fit_timing(
     timing, heard, mid = built
     config = problem.config
     model, motion = config.model, config.motion
-    noise = _MultipathEM(model)
+    noise = MultipathEM(model)
     if start is None:
         start = kalman.Hyper(
             motion.velocity_sd_km_per_day, motion.decorrelation_days, model.toa_sigma_s, INITIAL_CLOCK_RATE_SD_S_PER_DAY
@@ -265,7 +250,7 @@ def _checked_fit(
     for _ in range(MAX_RELEASES + 1):
         checks = timing_checks(timing.problem, timing.fit, timing.priors, timing.heard, timing.mid, problem.beacons,
                                problem.info, problem.config.checks)  # fmt: skip
-        candidates = [c for c in checks if c.outcome == CONTRADICTED and key_of(c) not in released]
+        candidates = [c for c in checks if releasable(c) and key_of(c) not in released]
         if not candidates or len(released) == MAX_RELEASES:
             break
         trials = []

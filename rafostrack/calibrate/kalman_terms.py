@@ -155,12 +155,17 @@ def _motion(problem: Problem, u: NDArray, hyper: Hyper, priors: KalmanPriors, ro
     _prior_row(rows, u, RATE, priors.clock_rate_s_per_day)
 
 
-def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows) -> None:
-    """Priors of the static parameters (slowness sds from sound-speed sds: ds = -dc / c^2)."""
+def _statics(problem: Problem, u: NDArray, priors: KalmanPriors, rows: Rows, array_priors: bool) -> None:
+    """Priors of the static parameters (slowness sds from sound-speed sds: ds = -dc / c^2);
+    without `array_priors`, the float's own only (its mean current): a mission fit puts the
+    array's priors in once (`rafostrack.mission`)."""
+    own = (np.array([problem.vbar, problem.vbar + 1]), priors.mean_current_km_per_day)
+    rows.add(u[own[0]] / own[1], [(own[0], np.full(2, 1 / own[1]))], -2.0 * float(np.log(own[1])))
+    if not array_priors:
+        return
     s0 = problem.slowness_s_per_m
     offset_sd, drift_sd = timing_prior_sd(problem, priors)
     for idx, sd in (
-        (np.array([problem.vbar, problem.vbar + 1]), priors.mean_current_km_per_day),
         (np.array([problem.ds]), priors.sound_speed_m_s * s0 * s0),
         (problem.per_beacon(0), offset_sd),
         (problem.per_beacon(1), drift_sd),
@@ -240,12 +245,16 @@ class Linearised:
         )
 
 
-def linearise(problem: Problem, u: NDArray, weight: NDArray, priors: KalmanPriors) -> Linearised:
+def linearise(
+    problem: Problem, u: NDArray, weight: NDArray, priors: KalmanPriors, *, array_priors: bool = True
+) -> Linearised:
+    """The model at u; without `array_priors` the sources' and the sound speed's priors are
+    left out (`_statics`)."""
     arrivals = Rows()
     toa_residual = _measurements(problem, u, weight, arrivals)
     fixed = Rows()
     n_end = _end_fix(problem, u, fixed)
-    _statics(problem, u, priors, fixed)
+    _statics(problem, u, priors, fixed, array_priors)
     return Linearised(
         problem,
         u,

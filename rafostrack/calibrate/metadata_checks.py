@@ -23,7 +23,8 @@ C_d^-1 is not positive: the arrivals alone do not fix it), or they lean away fro
 without being sure of it, or the source is heard on fewer than `MIN_SOURCE_ARRIVALS` of the
 fit's arrivals (then without a value). A value the table does not give (an empty
 clock_offset_end_s) is *estimated*, or undetermined when its sd exceeds the tolerance (then
-with a warning: the track rests on a value the data cannot check). What calibration does
+with a warning: the track rests on a value the data cannot check); without an end fix, it is
+the clock's offset at the last window the arrivals label surely (the check's `note` says when). What calibration does
 with a contradicted value (tracks with the arrivals' value) is `calibrate.release`'s.
 
 The check of one value (`MetadataCheck`), its outcome (`outcome_of`) and its warning are
@@ -82,6 +83,7 @@ __all__ = [
     "float_source",
     "outcome_of",
     "position_checks",
+    "shift_check",
     "source_information",
     "timing_checks",
     "undecided_note",
@@ -200,11 +202,11 @@ def _fix_checks(
     for name, node, index, prior_sd, z_score in fixes:
         arrivals = data_only(*post.block(index), np.array(prior_sd))
         given = (float(problem.lat[node]), float(problem.lon[node]))
-        found.append(_shift_check(file, line, info.float_id, name, given, arrivals, checks.fix_tolerance_km, z_score))
+        found.append(shift_check(file, line, info.float_id, name, given, arrivals, checks.fix_tolerance_km, z_score))
     return found
 
 
-def _shift_check(
+def shift_check(
     file: str,
     line: int | None,
     id_: str,
@@ -241,15 +243,20 @@ def _clock_checks(
     between them well and its level only as well as the sources' offsets allow, so the launch
     offset is checked through the level (both offsets' priors taken out), the end offset
     through the drift since launch (the launch offset taken as right unless its own check
-    contradicts it); an end offset the table leaves out is estimated."""
+    contradicts it); an end offset the table leaves out is estimated (without an end fix, at
+    the last node: the last window the arrivals label surely)."""
     file, line = float_source(info)
     start_sd, end_sd = _clock_sd(problem)  # an end offset released by calibration: no prior (inf)
     last = NODE * (problem.n_nodes - 1) + CLOCK
     if problem.end_sd_km is None or not info.has_end_clock:
         start = _clock_level_check(post, [CLOCK], [start_sd], info, checks)
-        if problem.end_sd_km is None:
+        if problem.end_sd_km is not None:
+            return [start, _estimated_end_clock(post, last, info, checks)]
+        if info.has_end_clock:
             return [start]
-        return [start, _estimated_end_clock(post, last, info, checks)]
+        stamp = np.datetime_as_string(problem.time[-1].astype("datetime64[s]")) + "Z"
+        note = f"at {stamp}, the last window the arrivals label surely (there is no end fix)"
+        return [start, dataclasses.replace(_estimated_end_clock(post, last, info, checks), note=note)]
     arrivals = data_only(*post.block([CLOCK, last]), np.array([start_sd, end_sd]))
     start = _clock_level_check(post, [CLOCK, last], [start_sd, end_sd], info, checks)
     if arrivals is None:
@@ -368,9 +375,7 @@ def position_checks(
         arrivals = data_only(*post.block(index), prior_sd) if judged[h] else None
         file, line, name = beacon_source(beacons, int(row))
         given = (float(beacons.lat[row]), float(beacons.lon[row]))
-        check = _shift_check(
-            file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks.z_score
-        )
+        check = shift_check(file, line, name, "position", given, arrivals, checks.position_tolerance_km, checks.z_score)
         if not judged[h]:
             found.append(check)
             continue

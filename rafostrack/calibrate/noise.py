@@ -67,3 +67,18 @@ def fit_clutter_rate(p_clutter: NDArray, record: ArrivalRecord, info: FloatInfo)
 def clutter_exposure(record: ArrivalRecord, info: FloatInfo) -> float:
     """The windows' time that could store clutter, in windows: sum_k h_k / W (module docstring)."""
     return sum(float(horizon_s(w.toa_s, info.max_signals, info.window_s)) / info.window_s for w in record.windows)
+
+
+class MultipathEM:
+    """The arrivals' direct-path weights for `kalman.fit`, multipath refitted by EM at each call."""
+
+    def __init__(self, model: ModelConfig):
+        self.model = model
+
+    def weight_of(self, residual_s: NDArray, toa_sigma_s: float) -> NDArray:
+        """P(direct) of each residual, under multipath fitted to them (`fit_multipath`)."""
+        eps, tau = fit_multipath(residual_s, toa_sigma_s, self.model)
+        self.model = dataclasses.replace(
+            self.model, toa_sigma_s=toa_sigma_s, multipath_fraction=eps, multipath_delay_s=tau
+        )
+        return direct_probability(residual_s, self.model)

@@ -7,6 +7,13 @@ position made an unknown of `KalmanPriors.released_position_km`. For the particl
 contradicted launch fix is then replaced by the position the arrivals support, and a
 contradicted end fix is not used.
 
+A GPS fix is data: one that the arrivals put more than `FIX_KEPT_BEYOND_KM` away is never
+released nor moved (`kept_fix`). So far off, it is the track or the tables that are wrong
+(a wrong source value pulls a float's whole track; a lost first pass contradicts every
+fix), not the satellite fix; the check stays contradicted, with the distance and a note
+saying so, and the float needs a look. (A launch longitude typed with the wrong sign,
+thousands of km off, is `launch_check`'s case.)
+
 Values are released one at a time (`calibrate._checked_fit`): a wrong value pulls the fit,
 and with it other values' checks (a wrong source position moves the track, and the end fix
 then looks wrong too); once the culprit is released, its echoes are consistent again. The
@@ -27,6 +34,8 @@ from .metadata_checks import CONTRADICTED, ESTIMATED, MetadataCheck
 
 RELEASED_FIX_SD_KM = 100.0
 RELEASED_CLOCK_SD_S = 120.0
+FIX_KEPT_BEYOND_KM = 50.0
+FIX_KEPT_NOTE = "kept as given: a GPS fix is data, so the track or the tables are wrong here; check them"
 
 TimingProblem = tuple[kalman.Problem, NDArray[np.intp], NDArray[np.float64]]  # problem, heard rows, mid days
 Key = tuple[str, str]  # (id, field) of a table value
@@ -65,9 +74,22 @@ def released_problem(built: TimingProblem, released: set[Key], beacons: BeaconTa
     )
 
 
+def kept_fix(check: MetadataCheck) -> bool:
+    """A fix the arrivals contradict by more than `FIX_KEPT_BEYOND_KM`: kept (module docstring)."""
+    far = isinstance(check.supported, float) and check.supported > FIX_KEPT_BEYOND_KM
+    return check.field in ("launch_fix", "end_fix") and check.outcome == CONTRADICTED and far
+
+
+def releasable(check: MetadataCheck) -> bool:
+    """A contradicted value calibration may release: any but a fix it keeps."""
+    return check.outcome == CONTRADICTED and not kept_fix(check)
+
+
 def used(check: MetadataCheck) -> MetadataCheck:
     """`check` with the value the track uses: the arrivals' where they contradict the table or
-    the table has none, the table's otherwise."""
+    the table has none, the table's otherwise (and for a fix it keeps, with its note)."""
+    if kept_fix(check):
+        return dataclasses.replace(check, used=check.given, note=FIX_KEPT_NOTE)
     value = check.supported if check.outcome in (CONTRADICTED, ESTIMATED) else check.given
     return dataclasses.replace(check, used=value)
 
@@ -79,7 +101,7 @@ def with_supported_fixes(info: FloatInfo, checks: list[MetadataCheck]) -> FloatI
     with the fix's own sd, a false alarm from a lost first pass pinned the next pass to a
     position hundreds of km off)."""
     for check in checks:
-        if check.outcome != CONTRADICTED or check.supported_lat_lon is None:
+        if not releasable(check) or check.supported_lat_lon is None:
             continue
         if check.field == "launch_fix":
             lat, lon = check.supported_lat_lon

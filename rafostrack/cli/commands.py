@@ -192,9 +192,15 @@ def simulate(out_dir, scenario, seed, days, n_floats, config_file, **flags) -> N
 @config_options("likelihood", "engine", "motion", "bathymetry")
 @click.option("--method", hidden=True, help="Removed: see --likelihood and --engine.")
 @click.option("--no-plots", is_flag=True, help="Skip the PNG plots.")
+@click.option(
+    "--no-array-fit",
+    is_flag=True,
+    help="Do not fit each mission's sound-source array on all its floats (nor track them again with it): "
+    "each float checks the tables alone.",
+)
 @debug_option
 @report_errors
-def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots, **flags) -> None:
+def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots, no_array_fit, **flags) -> None:
     """Track every float of the mission directories under ROOTs, skipping unchanged ones.
 
     Exit code 0 when every float succeeded, 1 when some failed, 2 on a usage error
@@ -215,6 +221,7 @@ def batch(roots, out_dir, jobs, force, scheduler, config_file, method, no_plots,
         config_file=config_file,
         overrides=config_overrides(**flags),
         plots=not no_plots,
+        array_fit=not no_array_fit,
     )
     click.echo(result.summary)
     sys.exit(result.exit_code)
@@ -231,7 +238,9 @@ def summary(out_root) -> None:
     from ..batch.overview import OK, summarise_tree, write_overview
 
     overview = summarise_tree(out_root)
-    html_path = write_overview(overview)[0]
+    html_path = write_overview(
+        overview, notice=lambda message: click.echo(f"rafostrack: warning: {message}", err=True)
+    )[0]
     click.echo(f"{len(overview.rows)} floats, {len(overview.rows) - overview.count(OK)} need a look -> {html_path}")
 
 

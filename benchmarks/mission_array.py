@@ -1,0 +1,161 @@
+"""The mission's array fit on stress missions whose tables carry several faults at once.
+
+One mission of `--floats` floats per scenario seed in one array (`--geometry`, DIMES by
+default; `rafostrack.sim.stress`, a generator that is not the tracker's model: eddying
+drift, clock wander, multipath, outages, per-source sound speeds, clutter), written twice:
+with the correct tables and with the faults `--faults` (by default four source values and
+one float clock, the case a field catalogue brings: an offset 20-40 s off, another source in
+the next slot, a position 20-40 km off, a drift 0.02-0.05 s/day off, and end clock offsets
+left out on a share `--clock-share` of the floats). Each is tracked with `rafostrack batch`
+as a user would: the correct tables (array fit on: false findings), the faulted ones
+without the array fit (`--no-array-fit`: each float checking the tables alone) and with it.
+Prints per run and float the RMSE, p95 and confidently wrong windows (error > 30 km with
+sd_km under half of it) against the truth, then per run: floats beyond the correct tables'
+run (RMSE > max(5 km, 1.2x) or p95 > max(15 km, 1.2x)), the median RMSE, the confidently
+wrong windows, the fixes the tracks moved by more than 50 km, and for the array fit each
+injected source fault (named by the mission: `array.csv` contradicted, with the right
+source and field; its estimate within 2 sd of the truth) and the false findings (values
+contradicted that were right).
+
+    python benchmarks/mission_array.py [--floats 24] [--days 240] [--seed 2026 ...]
+                                       [--faults KIND,...] [--jobs 2] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from rafostrack.batch import run_batch
+from rafostrack.model.geodesy import local_offsets_km
+from rafostrack.sim.evaluate import confidently_wrong, position_errors_km
+from rafostrack.sim.faults import InjectedFault, read_faults
+from rafostrack.sim.stress import simulate_stress, with_faults, write_stress_mission
+from rafostrack.sim.stress_config import StressConfig
+from rafostrack.sim.stress_float import substream
+
+FAULTS = "source_offset,source_slot,source_position,source_drift,end_clock_missing"
+FAULT_STREAM = 77
+RUNS = ("correct", "faulted alone", "faulted + array")
+
+
+def make_missions(
+    root: Path, n: int, days: int, seed: int, faults: tuple[str, ...], share: float, geometry: str
+) -> None:
+    """`root/correct` and `root/faulted`: the same floats, the tables correct and faulted."""
+    cfg = StressConfig(days=days, clutter_rate=1.5, clock_end_offset_s=(-40.0, 40.0))
+    rng = np.random.default_rng([seed, 53])
+    mission = simulate_stress(geometry, n, rng, cfg, prefix="f")
+    write_stress_mission(mission, root / "correct" / "m")
+    wrong = dataclasses.replace(cfg, faults=faults, fault_float_share=share)
+    write_stress_mission(with_faults(mission, wrong, substream(rng, FAULT_STREAM)), root / "faulted" / "m")
+
+
+def scores(out: Path, mission: Path) -> pd.DataFrame:
+    """Per float: RMSE, p95, confidently wrong windows and the fixes moved > 50 km."""
+    rows = []
+    for truth_file in sorted((mission / "truth").glob("*.csv")):
+        float_dir = out / "m" / truth_file.stem
+        track = pd.read_parquet(float_dir / "track.parquet")
+        track["time"] = track["time"].dt.tz_localize(None)
+        truth = pd.read_csv(truth_file, parse_dates=["time"])
+        truth["time"] = truth["time"].dt.tz_localize(None)
+        err = position_errors_km(track, truth)
+        checks = json.loads((float_dir / "run.json").read_text()).get("metadata_checks", [])
+        moved = [c for c in checks if c["field"].endswith("_fix") and c.get("used") not in (None, c.get("given"))
+                 and (c.get("supported") or 0) > 50]  # fmt: skip
+        rows.append({"float": truth_file.stem, "rmse_km": float(np.sqrt(np.nanmean(err**2))),
+                     "p95_km": float(np.nanpercentile(err, 95)),
+                     "confident_wrong": int(confidently_wrong(err, track["sd_km"].to_numpy()).sum()),
+                     "fixes_moved": len(moved)})  # fmt: skip
+    return pd.DataFrame(rows).set_index("float")
+
+
+def _within(fault: InjectedFault, row: dict[str, str]) -> bool:
+    """Whether the mission's estimate of a faulted value lies within 2 sd of the truth."""
+    if not row.get("sd"):
+        return False
+    sd = float(row["sd"])
+    if fault.field == "position":
+        lat, lon = (float(v) for v in row["estimated"].split())
+        east, north = local_offsets_km(lat, lon, *fault.true)  # type: ignore[misc]
+        return bool(np.hypot(east, north) < 2 * sd)
+    return abs(float(row["estimated"]) - float(fault.true)) < 2 * sd  # type: ignore[arg-type]
+
+
+def array_verdict(out: Path, mission: Path) -> dict[str, object]:
+    """The source faults the mission named (and estimated within 2 sd) and its false findings."""
+    path = out / "m" / "array.csv"
+    rows = {(r["source"], r["field"]): r for r in csv.DictReader(path.open())} if path.exists() else {}
+    faults = [f for f in read_faults(mission / "truth" / "faults.json") if f.file == "beacons.csv"]
+    wrong = {(f.id, f.field) for f in faults}
+    named = [f for f in faults if rows.get((f.id, f.field), {}).get("outcome") == "contradicted"]
+    within = [f for f in named if _within(f, rows[f.id, f.field])]
+    false = [k for k, r in rows.items() if r["outcome"] == "contradicted" and k not in wrong]
+    return {
+        "source faults": len(faults),
+        "named": len(named),
+        "within 2 sd": len(within),
+        "false findings": len(false),
+        "values checked": len(rows),
+        "faults": "; ".join(f"{f.id} {f.field} {f.written}->{f.true}" for f in faults),
+        "named ones": "; ".join(f"{f.id} {f.field}" for f in named),
+        "false ones": "; ".join(map(" ".join, false)),
+    }
+
+
+def run(root: Path, seed: int, args: argparse.Namespace) -> None:
+    make_missions(root, args.floats, args.days, seed, tuple(args.faults.split(",")), args.clock_share, args.geometry)
+    tables = {}
+    for name, mission, flags in (("correct", "correct", {}), ("faulted alone", "faulted", {"array_fit": False}),
+                                 ("faulted + array", "faulted", {})):  # fmt: skip
+        out = root / "out" / name.replace(" ", "_").replace("+", "and")
+        started = time.perf_counter()
+        run_batch([root / mission], out, jobs=args.jobs, plots=False, stream=open("/dev/null", "w"), **flags)
+        table = scores(out, root / mission / "m")
+        tables[name] = table
+        print(f"seed {seed}, {name}: {time.perf_counter() - started:.0f} s", flush=True)
+        if name != "faulted alone":
+            print(f"  array: {array_verdict(out, root / mission / 'm')}", flush=True)
+    ok = tables["correct"]
+    print(pd.concat(tables, axis=1).round(1).to_string())
+    for name, table in tables.items():
+        lost = (table["rmse_km"] > np.maximum(5, 1.2 * ok["rmse_km"])) | (
+            table["p95_km"] > np.maximum(15, 1.2 * ok["p95_km"])
+        )
+        print(f"seed {seed}, {name}: beyond the correct tables' run {int(lost.sum())} of {len(table)}; median RMSE "
+              f"{table['rmse_km'].median():.1f} km; confidently wrong windows {int(table['confident_wrong'].sum())}; "
+              f"fixes moved > 50 km {int(table['fixes_moved'].sum())}")  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--floats", type=int, default=24)
+    parser.add_argument("--days", type=int, default=240)
+    parser.add_argument("--seed", type=int, nargs="+", default=[2026])
+    parser.add_argument("--faults", default=FAULTS)
+    parser.add_argument("--clock-share", type=float, default=0.1, help="share of floats whose end clock is left out")
+    parser.add_argument("--geometry", default="dimes")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--out", type=Path, help="keep the missions and outputs here")
+    args = parser.parse_args()
+    print(" ".join(sys.argv), flush=True)
+    for seed in args.seed:
+        if args.out is not None:
+            run(args.out / str(seed), seed, args)
+            continue
+        with tempfile.TemporaryDirectory() as tmp:
+            run(Path(tmp), seed, args)
+
+
+if __name__ == "__main__":
+    main()

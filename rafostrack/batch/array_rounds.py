@@ -1,0 +1,160 @@
+"""The mission rounds of a batch: fit each mission's array on its tracked floats, and track
+them again with the array the mission decided, until it settles.
+
+Round 1 tracks every float with its mission's tables (each float checking only what its own
+arrivals can). Then, per mission, the array fit (`rafostrack.mission`) takes every float
+whose outputs are current, judges each source's offset, drift and position on all of them
+together, and writes `OUT/<mission>/array.csv`, `array.json`, `array.png` and, where it
+decided a value, `beacons-calibrated.csv`: the user's beacons.csv with only those cells
+changed. The mission's floats are then planned again with that table (its bytes are in each
+float's key, so a float already tracked with the same table is skipped) and the array
+fitted again on their new labels, at most `MAX_ROUNDS` rounds in all; each round's decided
+values and the fit's misfit are logged and kept in `array.json`.
+
+The fit's corrections are always to the tables as given (the floats' labels change between
+rounds, not the reference), so a rerun on unchanged inputs decides the same table and
+tracks nothing: round 1 of a rerun plans with the calibrated table that `array.json` says
+was made from the same beacons.csv.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..errors import InputError
+from ..io.atomic import write_text_atomic
+from ..io.writers import file_digest
+from .discover import Mission
+from .plan import FloatOutcome
+
+MAX_ROUNDS = 3
+ARRAY_JSON = "array.json"
+
+
+@dataclass(frozen=True)
+class ArrayRound:
+    """What one mission's array fit decided in one round."""
+
+    mission: str
+    floats: int
+    decided: list[str]  # "<source> <field>"
+    calibrated: Path | None  # the table its floats are to be tracked with (None: as given)
+    rms_residual_s: float
+    settled: bool  # the table its floats were tracked with holds the decisions already
+    trusted: bool = True  # the floats fit one array (`MissionArray.trusted`)
+
+
+def calibrated_tables(missions: Sequence[Mission], out: Path) -> dict[str, Path]:
+    """Per mission, the calibrated table a previous run made from the same beacons.csv."""
+    tables = {}
+    for mission in missions:
+        record = out / mission.name / ARRAY_JSON
+        try:
+            made = json.loads(record.read_text(encoding="utf-8"))
+            if made.get("beacons_sha256") == file_digest(mission.path / "beacons.csv") and made.get("calibrated"):
+                tables[mission.name] = out / mission.name / made["calibrated"]
+        except (OSError, ValueError, AttributeError):
+            continue
+    return {name: path for name, path in tables.items() if path.is_file()}
+
+
+def fit_mission(
+    mission: Mission,
+    out: Path,
+    config_files: tuple[Path, ...],
+    overrides: dict[str, Any],
+    plots: bool,
+    round_: int,
+) -> ArrayRound | None:
+    """The mission's array fitted on its floats' current outputs and written in
+    OUT/<mission>; None when no float has outputs with enough confident arrivals. The
+    calibrated table is rewritten only when the decisions moved (`settled_in`), and never in
+    the last round: the floats were tracked with the table there is."""
+    from ..io import read_beacons
+    from ..mission.from_outputs import tracked_float
+    from ..mission.outputs import CALIBRATED_NAME, write_array_outputs
+    from ..mission.run import fit_mission_array
+    from ..run.one_float import TrackInputs
+
+    tracked = []
+    for float_id in sorted(mission.rows):
+        out_dir = out / mission.name / float_id
+        if not (out_dir / "run.json").is_file():
+            continue
+        float_path = mission.path / f"{float_id}.csv"
+        inputs = TrackInputs(float_path=float_path, config_files=config_files, overrides=overrides)
+        try:
+            tracked.append(tracked_float(inputs, out_dir))
+        except (InputError, OSError, KeyError, ValueError):
+            continue  # its own outcome says why; the array rests on the others
+    fitted_mission = fit_mission_array(tracked)
+    if fitted_mission is None:
+        return None
+    array = fitted_mission.array
+    previous = calibrated_tables([mission], out).get(mission.name)
+    try:
+        settled = previous is not None and array.settled_in(read_beacons(previous))
+    except InputError:  # an earlier run's table that no longer reads: written anew
+        settled = False
+    keep = settled or (previous is not None and round_ == MAX_ROUNDS)
+    write_array_outputs(array, out / mission.name, mission.path / "beacons.csv", plots=plots, keep_calibrated=keep)
+    decided = [f"{v.check.id} {v.check.field}" for v in array.decided()]
+    rms = array.rms_residual_s()
+    calibrated = out / mission.name / CALIBRATED_NAME
+    fitted = ArrayRound(
+        mission.name,
+        len(array.fit.floats),
+        decided,
+        calibrated if calibrated.is_file() else None,
+        rms,
+        settled,
+        array.is_trusted,
+    )
+    _record(fitted, mission, out, round_)
+    return fitted
+
+
+def _record(fitted: ArrayRound, mission: Mission, out: Path, round_: int) -> None:
+    """`array.json`: the table the fit was made from, what it decided, each round's figures."""
+    path = out / mission.name / ARRAY_JSON
+    try:
+        rounds = json.loads(path.read_text(encoding="utf-8")).get("rounds", []) if round_ > 1 else []
+    except (OSError, ValueError):
+        rounds = []
+    rounds.append({"round": round_, "floats": fitted.floats, "decided": fitted.decided,
+                   "rms_residual_s": round(fitted.rms_residual_s, 3), "settled": fitted.settled})  # fmt: skip
+    record = {
+        "beacons_sha256": file_digest(mission.path / "beacons.csv"),
+        "calibrated": fitted.calibrated.name if fitted.calibrated is not None else None,
+        "decided": fitted.decided,
+        "rounds": rounds,
+    }
+    write_text_atomic(path, json.dumps(record, indent=1) + "\n")
+
+
+def round_line(fitted: ArrayRound, round_: int) -> str:
+    """One log line of a mission's array fit."""
+    what = f"decided {', '.join(fitted.decided)}" if fitted.decided else "no table value decided"
+    if not fitted.trusted:
+        what = "the floats do not fit one array (their tracks or labels are off): nothing decided"
+    if fitted.settled:
+        what += "; settled: the floats were tracked with these values"
+    elif round_ == MAX_ROUNDS and fitted.decided:
+        what += f"; not settled after {MAX_ROUNDS} rounds: the floats keep the table of the round before"
+    return (
+        f"mission {fitted.mission}: array fit, round {round_}, on {fitted.floats} float(s): {what} "
+        f"(weighted rms residual {fitted.rms_residual_s:.2f} s)"
+    )
+
+
+def replaced(outcomes: list[FloatOutcome], newer: list[FloatOutcome]) -> list[FloatOutcome]:
+    """The outcomes with each float's newer outcome in place of its older one (a float that
+    failed in a later round keeps the failure)."""
+    latest = {(o.mission, o.float_id): o for o in newer}
+    return [latest.get((o.mission, o.float_id), o) for o in outcomes] + [
+        o for o in newer if (o.mission, o.float_id) not in {(p.mission, p.float_id) for p in outcomes}
+    ]

@@ -1,0 +1,133 @@
+"""A mission's array calibrated: fitted on every float (`array_fit`), its values judged
+(`array_checks`), the contradicted ones released one at a time and fitted again.
+
+One at a time, the strongest first: under the tight priors of a source's values, a wrong
+one pulls the fit, and with it the judgement of the others (an offset 25 s off leans on the
+shared sound speed, which every other source then seems to contradict a little). Released,
+its prior is wide (`KalmanPriors.released_*`) and its estimate the arrivals'; the others are
+judged again without its pull. What is still contradicted after `MAX_RELEASES` is reported
+so, and not corrected.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..calibrate import kalman
+from ..calibrate.metadata_checks import CONTRADICTED
+from ..config import Config
+from ..domain import BeaconTable
+from ..model.geodesy import local_offsets_km
+from .array_checks import RELEASES, ArrayValue, array_values, strongest_contradiction
+from .array_fit import SOURCE_BLOCKS, ArrayFit, fit_array
+from .floats import MissionFloat
+
+MAX_RELEASES = 12
+RELEASE_ITERATIONS = 3  # Gauss-Newton steps after a release, from the previous fit
+TRUSTED_RMS = 3.0
+
+
+def local_distance_km(lat: NDArray, lon: NDArray, lat0: NDArray, lon0: NDArray) -> NDArray[np.float64]:
+    """Distances (km) of positions from others nearby (tangent plane at the others)."""
+    east, north = local_offsets_km(lat, lon, lat0, lon0)
+    return np.hypot(east, north)
+
+
+@dataclass(frozen=True)
+class MissionArray:
+    """The array fitted on a mission, its judged values and what was released."""
+
+    fit: ArrayFit
+    values: list[ArrayValue]
+    released: NDArray[np.bool_]  # (G, 5) by source and theta block
+    beacons: BeaconTable  # as given
+    is_trusted: bool = True  # `trusted` at the configured TOA sd
+
+    def rms_residual_s(self) -> float:
+        """The weighted rms of the floats' arrival residuals at the fit."""
+        r, w = np.concatenate(self.fit.toa_residual_s), np.concatenate(self.fit.weight)
+        return float(np.sqrt(np.sum(w * r**2) / max(float(np.sum(w)), 1.0)))
+
+    def trusted(self, toa_sigma_s: float) -> bool:
+        """Whether the floats fit one array: the weighted rms residual within `TRUSTED_RMS`
+        times the configured TOA sd (floats whose tracks are lost, or labels not the
+        sources', fit none; the mission then decides nothing)."""
+        return self.rms_residual_s() <= TRUSTED_RMS * toa_sigma_s
+
+    def decided(self) -> list[ArrayValue]:
+        """The values the mission contradicts and estimates (released, fitted again); none
+        when the fit is not `trusted`."""
+        if not self.is_trusted:
+            return []
+        return [
+            v
+            for v in self.values
+            if v.check.outcome == CONTRADICTED and self.released[v.source, RELEASES[v.check.field][0]]
+        ]
+
+    def calibrated_beacons(self) -> BeaconTable:
+        """The table as given with only the decided values replaced by the mission's."""
+        offset, drift = self.beacons.offset_s.copy(), self.beacons.drift_s_per_day.copy()
+        lat, lon = self.beacons.lat.copy(), self.beacons.lon.copy()
+        for value in self.decided():
+            row, check = int(self.fit.layout.sources[value.source]), value.check
+            if check.field == "offset_s":
+                offset[row] = float(check.supported)  # type: ignore[arg-type]
+            elif check.field == "drift_s_per_day":
+                drift[row] = float(check.supported)  # type: ignore[arg-type]
+            elif check.supported_lat_lon is not None:
+                lat[row], lon[row] = check.supported_lat_lon
+        return dataclasses.replace(self.beacons, offset_s=offset, drift_s_per_day=drift, lat=lat, lon=lon)
+
+    def settled_in(self, table: BeaconTable) -> bool:
+        """Whether `table` (the one the floats were tracked with) already holds what the
+        mission decides: each decided value within half its sd, every other as given."""
+        ours = self.calibrated_beacons()
+        tolerance = {"offset_s": 0.0, "drift_s_per_day": 0.0, "position": 0.0}
+        close = np.ones(len(ours), dtype=bool)
+        for v in self.decided():
+            row = int(self.fit.layout.sources[v.source])
+            tolerance[v.check.field] = 0.5 * float(v.check.sd or 0.0)
+            close[row] = False
+        if len(table) != len(ours) or not np.array_equal(table.beacon_id, ours.beacon_id):
+            return False
+        km = local_distance_km(table.lat, table.lon, ours.lat, ours.lon)
+        return bool(
+            np.all(np.abs(table.offset_s - ours.offset_s) <= tolerance["offset_s"] + 1e-9)
+            and np.all(np.abs(table.drift_s_per_day - ours.drift_s_per_day) <= tolerance["drift_s_per_day"] + 1e-12)
+            and np.all(km <= tolerance["position"] + 1e-6)
+        )
+
+
+def array_priors(config: Config) -> kalman.KalmanPriors:
+    """The array's priors; a sound speed the user set is held (1 mm/s), as a float's
+    calibration holds it."""
+    if ("model", "sound_speed_m_s") in config.explicit:
+        return kalman.KalmanPriors(sound_speed_m_s=1e-3, beacon_sound_speed_m_s=1e-3)
+    return kalman.DEFAULT_PRIORS
+
+
+def calibrated_array(floats: Sequence[MissionFloat], beacons: BeaconTable, config: Config) -> MissionArray:
+    """Fit the array on `floats`, judge its values and release the contradicted ones one at
+    a time, strongest first (module docstring)."""
+    priors = array_priors(config)
+    fit = fit_array(floats, config, priors=priors)
+    released = np.zeros((len(fit.layout.sources), len(SOURCE_BLOCKS)), dtype=bool)
+    values = array_values(fit, beacons, config.checks)
+    for _ in range(MAX_RELEASES):
+        worst = strongest_contradiction(values, released)
+        if worst is None:
+            break
+        released[worst.source, list(RELEASES[worst.check.field])] = True
+        fit = fit_array(fit.floats, config, released, start=fit, priors=priors, iterations=RELEASE_ITERATIONS)
+        values = array_values(fit, beacons, config.checks)
+    array = MissionArray(fit, values, released, beacons)
+    return dataclasses.replace(array, is_trusted=array.trusted(config.model.toa_sigma_s))
+
+
+__all__ = ["MAX_RELEASES", "MissionArray", "array_priors", "calibrated_array"]

@@ -1,0 +1,134 @@
+"""The array's table values judged on the whole mission: each source's offset, drift and
+position against what every float's arrivals together support.
+
+The array fit's posterior of theta, N(theta, S^-1), has every float's own unknowns (nodes,
+clocks, mean current) already eliminated (`schur`): a float's clock error is its own, and
+only a source's values shared by all its floats are left. As a float's checks do
+(`calibrate.metadata_checks`), a value's prior is taken out of its marginal to give the
+arrivals' own estimate (`data_only`), judged by the same rule (`outcome_of`: contradicted
+beyond `[checks] z_score` sds and the value's tolerance; consistent within it; else
+undetermined). Per source, the offset at the table's epoch (o = a - d mid) and the drift
+from the joint estimate of (a, d); the position from that of (east, north, a, d), judged
+along the displacement (a displacement along every float's bearing is an offset: only
+floats heard from several bearings decide it). A source heard on fewer than
+`MIN_SOURCE_ARRIVALS` weighted arrivals in all is not judged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..calibrate.metadata_checks import (
+    CONTRADICTED,
+    MIN_SOURCE_ARRIVALS,
+    UNDETERMINED,
+    MetadataCheck,
+    beacon_source,
+    data_only,
+    outcome_of,
+    shift_check,
+    z_of,
+)
+from ..config import ChecksConfig
+from ..domain import BeaconTable
+from .array_fit import ArrayFit
+
+# The theta blocks (`array_fit.SOURCE_BLOCKS`) a field's release frees.
+RELEASES = {"offset_s": (0,), "drift_s_per_day": (1,), "position": (3, 4)}
+# Corrections beyond these are no estimate: the linearised model does not reach so far (a
+# source's range is linear in its displacement d only while d^2 / 2R stays small: 5 km at
+# 1000 km for d = 100 km), or the floats' labels were not the source's. Such a value is
+# undetermined, never written into the calibrated table.
+PLAUSIBLE = {"offset_s": 1000.0, "drift_s_per_day": 0.2, "position": 100.0}
+
+
+@dataclass(frozen=True)
+class ArrayValue:
+    """One source's value judged on the mission: the check, and the floats and weighted
+    arrivals it rests on."""
+
+    check: MetadataCheck
+    source: int  # position in the array's sources
+    floats: int
+    arrivals: float
+
+
+def support(fit: ArrayFit) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """(G,) per source the floats that heard it and the weight of their arrivals."""
+    n = len(fit.layout.sources)
+    floats, arrivals = np.zeros(n, dtype=np.int64), np.zeros(n)
+    for f, w in zip(fit.floats, fit.weight, strict=True):
+        where = np.searchsorted(fit.layout.sources, f.heard)
+        floats[where] += 1
+        np.add.at(arrivals, where[f.problem.beacon], w)
+    return floats, arrivals
+
+
+def _block(fit: ArrayFit, source: int, blocks: tuple[int, ...]) -> tuple[NDArray, NDArray] | None:
+    """The arrivals' own estimate (mean, covariance) of a source's unknowns in `blocks`."""
+    idx = fit.layout.column(np.array(blocks), source)
+    return data_only(fit.theta[idx], fit.covariance[np.ix_(idx, idx)], fit.priors.sd()[idx])
+
+
+def _timing_values(
+    fit: ArrayFit, source: int, row: int, beacons: BeaconTable, checks: ChecksConfig, judged: bool
+) -> list[MetadataCheck]:
+    """A source's offset at its epoch and its drift."""
+    file, line, name = beacon_source(beacons, row)
+    joint = _block(fit, source, (0, 1)) if judged else None
+    mid = float(fit.layout.mid_days[source])
+    values = (
+        ("offset_s", float(beacons.offset_s[row]), np.array([1.0, -mid]), checks.offset_tolerance_s, "s", 3),
+        ("drift_s_per_day", float(beacons.drift_s_per_day[row]), np.array([0.0, 1.0]),
+         checks.drift_tolerance_s_per_day, "s/day", 5),
+    )  # fmt: skip
+    found = []
+    for field, given, weights, tolerance, unit, digits in values:
+        if joint is None:
+            found.append(MetadataCheck(file, line, name, field, given, None, None, unit, UNDETERMINED))
+            continue
+        correction = float(weights @ joint[0])
+        sd = float(np.sqrt(weights @ joint[1] @ weights))
+        outcome = outcome_of(correction, sd, tolerance, checks.z_score)
+        found.append(MetadataCheck(file, line, name, field, given, round(given + correction, digits),
+                                   round(sd, digits), unit, outcome))  # fmt: skip
+    return found
+
+
+def plausible(check: MetadataCheck) -> MetadataCheck:
+    """`check`, undetermined where its correction lies beyond `PLAUSIBLE`."""
+    if check.supported is None or check.given is None or isinstance(check.supported, str):
+        return check
+    shift = float(check.supported) - (0.0 if check.field == "position" else float(check.given))  # type: ignore[arg-type]
+    if abs(shift) <= PLAUSIBLE[check.field]:
+        return check
+    return dataclasses.replace(check, outcome=UNDETERMINED, note="beyond what the linearised fit can estimate")
+
+
+def array_values(fit: ArrayFit, beacons: BeaconTable, checks: ChecksConfig) -> list[ArrayValue]:
+    """Every source's offset, drift and position judged on the mission (module docstring),
+    undetermined beyond `PLAUSIBLE`."""
+    floats, arrivals = support(fit)
+    found = []
+    for g, row in enumerate(fit.layout.sources):
+        judged = arrivals[g] >= MIN_SOURCE_ARRIVALS
+        timing = _timing_values(fit, g, int(row), beacons, checks, judged)
+        file, line, name = beacon_source(beacons, int(row))
+        given = (float(beacons.lat[row]), float(beacons.lon[row]))
+        joint = _block(fit, g, (3, 4, 0, 1)) if judged else None
+        position = shift_check(file, line, name, "position", given, joint, checks.position_tolerance_km, checks.z_score)
+        found += [ArrayValue(plausible(c), g, int(floats[g]), float(arrivals[g])) for c in (*timing, position)]
+    return found
+
+
+def strongest_contradiction(values: list[ArrayValue], released: NDArray[np.bool_]) -> ArrayValue | None:
+    """The contradicted value farthest from its table value in its sds, of those not yet
+    released (`released` (G, 5) by theta block); None when there is none."""
+    open_ = [
+        v for v in values if v.check.outcome == CONTRADICTED and not released[v.source, RELEASES[v.check.field][0]]
+    ]
+    return max(open_, key=lambda v: z_of(v.check), default=None)

@@ -1,0 +1,219 @@
+"""The mission's array fit: every float's confident arrivals in one problem whose shared
+block is the sound-source array (each source's offset, drift, sound-speed deviation and
+position, and the shared sound speed), fitted by Gauss-Newton on the block-arrow normal
+equations (`schur`).
+
+Each float keeps its own nodes, clock and mean current, and its own hyperparameters (fitted
+to its arrivals once, at the first linearisation, by maximum marginal likelihood as its
+own calibration does); its arrivals' weights are refitted at every step (`MultipathEM`: a
+delayed or mislabelled arrival gets little weight). The array's unknowns theta are
+corrections to the tables as given, under the priors of `KalmanPriors` put in once for the
+mission (a float's normal equations leave them out: `linearise(..., array_priors=False)`);
+a source whose value the mission contradicts is `released` (wide priors) and fitted again,
+so that its estimate is the arrivals'.
+
+Layout of theta: the shared slowness deviation, then per source (`ArrayLayout.sources`,
+beacon-table rows) its five unknowns in `SOURCE_BLOCKS` order.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..calibrate import kalman
+from ..calibrate.kalman_problem import NODE
+from ..calibrate.noise import MultipathEM
+from ..config import Config
+from .floats import BANDWIDTH, MissionFloat, referred
+from .schur import FloatBlock, solve_mission
+
+# A source's unknowns, in the order of `kalman_problem.Problem.per_beacon`'s blocks.
+SOURCE_BLOCKS = ("offset_s", "drift_s_per_day", "slowness_s_per_m", "east_km", "north_km")
+ITERATIONS = 6
+GATE_S = 60.0  # an arrival's residual beyond this: weight 0 (`_refitted_noise`)
+SIGMA_CAP = 3.0  # a float's TOA sd at most this many times the configured one
+# The most a Gauss-Newton step moves a source's unknown, per `SOURCE_BLOCKS` (None: free).
+STEP_LIMITS = (20.0, 0.02, None, 20.0, 20.0)
+
+
+@dataclass(frozen=True)
+class ArrayLayout:
+    """Where each source's unknowns are in theta, and each source's drift reference."""
+
+    sources: NDArray[np.intp]  # (G,) beacon-table rows
+    mid_days: NDArray[np.float64]  # (G,) mean days since the source's epoch of its arrivals
+
+    @classmethod
+    def of(cls, floats: Sequence[MissionFloat]) -> ArrayLayout:
+        rows = np.concatenate([f.heard[f.problem.beacon] for f in floats])
+        days = np.concatenate([f.days for f in floats])
+        sources, index = np.unique(rows, return_inverse=True)
+        mid = np.bincount(index, weights=days) / np.bincount(index)
+        return cls(sources, mid)
+
+    @property
+    def size(self) -> int:
+        return 1 + len(SOURCE_BLOCKS) * len(self.sources)
+
+    def column(self, block: NDArray | int, source: NDArray | int) -> NDArray[np.intp]:
+        """theta's index of `block`s (of `SOURCE_BLOCKS`) of sources (positions in `sources`)."""
+        return np.asarray(1 + len(SOURCE_BLOCKS) * np.asarray(source) + block, dtype=np.intp)
+
+    def float_columns(self, f: MissionFloat) -> NDArray[np.intp]:
+        """theta's index of each of a float's array unknowns, in its problem's order."""
+        where = np.searchsorted(self.sources, f.heard)
+        return np.concatenate([[0], *(self.column(b, where) for b in range(len(SOURCE_BLOCKS)))]).astype(np.intp)
+
+
+@dataclass(frozen=True)
+class ArrayPriors:
+    """The array's prior sds (theta's units), per source where released."""
+
+    slowness_s_per_m: float
+    source: NDArray[np.float64]  # (G, 5) per source and block
+
+    @classmethod
+    def of(
+        cls, layout: ArrayLayout, priors: kalman.KalmanPriors, s0: float, released: NDArray[np.bool_] | None = None
+    ) -> ArrayPriors:
+        """`KalmanPriors`' sds; `released` (G, 5): the blocks under the released sds."""
+        normal = [priors.offset_s, priors.drift_s_per_day, priors.beacon_sound_speed_m_s * s0 * s0,
+                  priors.source_position_km, priors.source_position_km]  # fmt: skip
+        wide = [priors.released_offset_s, priors.released_drift_s_per_day, priors.beacon_sound_speed_m_s * s0 * s0,
+                priors.released_position_km, priors.released_position_km]  # fmt: skip
+        free = np.zeros((len(layout.sources), 5), dtype=bool) if released is None else released
+        return cls(priors.sound_speed_m_s * s0 * s0, np.where(free, np.array(wide), np.array(normal)))
+
+    def sd(self) -> NDArray[np.float64]:
+        """(theta size,) the prior sd of each unknown."""
+        return np.concatenate([[self.slowness_s_per_m], self.source.ravel()])
+
+
+@dataclass(frozen=True)
+class ArrayFit:
+    """The array fitted on the mission: theta, its covariance, each float's own unknowns,
+    arrival weights and residuals, the floats (with their fitted TOA sds)."""
+
+    layout: ArrayLayout
+    floats: list[MissionFloat]
+    theta: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    own: list[NDArray[np.float64]]  # per float, its own unknowns
+    weight: list[NDArray[np.float64]]  # per float, its arrivals' direct-path weights
+    toa_residual_s: list[NDArray[np.float64]]
+    priors: ArrayPriors
+    s0: float  # the configured slowness (s/m)
+
+    def correction(self, block: int) -> NDArray[np.float64]:
+        """(G,) each source's fitted correction of `block`."""
+        return self.theta[self.layout.column(block, np.arange(len(self.layout.sources)))]
+
+    def unknowns(self, k: int) -> NDArray[np.float64]:
+        """Float k's unknowns in its problem's order: its own, then its view of theta."""
+        return np.concatenate([self.own[k], self.theta[self.layout.float_columns(self.floats[k])]])
+
+
+def _float_step(
+    f: MissionFloat, u: NDArray, weight: NDArray, priors: kalman.KalmanPriors, columns: NDArray
+) -> tuple[FloatBlock, NDArray]:
+    """A float's block of the normal equations at its unknowns u (own, then the array's
+    columns), and its arrivals' residuals there."""
+    lin = kalman.linearise(f.problem, u, weight, priors, array_priors=False)
+    normal = lin.normal(f.hyper)
+    block = FloatBlock.of(normal.jtj, -normal.jtr, NODE * f.problem.n_nodes, BANDWIDTH, f.n_own, columns)
+    return block, lin.toa_residual_s
+
+
+def _step_scale(d_theta: NDArray, layout: ArrayLayout) -> float:
+    """The fraction of a Gauss-Newton step to take: the whole step unless a source's move
+    exceeds `STEP_LIMITS` in one of its unknowns (a trust region: far from the solution the
+    linearised model's step can overshoot by far, e.g. from floats whose labels are wrong),
+    then the step shortened along its direction to that limit."""
+    scale = 1.0
+    for block, limit in enumerate(STEP_LIMITS):
+        if limit is None:
+            continue
+        largest = float(np.max(np.abs(d_theta[layout.column(block, np.arange(len(layout.sources)))]), initial=0.0))
+        if largest > limit:
+            scale = min(scale, limit / largest)
+    return scale
+
+
+def _refitted_noise(
+    f: MissionFloat, residual_s: NDArray, noise: MultipathEM, sigma_cap_s: float
+) -> tuple[MissionFloat, NDArray]:
+    """The float's arrivals' direct-path weights (multipath by EM; none beyond `GATE_S`:
+    an arrival so far off is not the labelled source's, or the float's track is not where
+    the float was) and its TOA sd from the weighted residuals, sigma^2 = sum w r^2 / sum w,
+    at most `sigma_cap_s` (a float whose residuals are wider fits the array worse, it does
+    not widen its own noise to fit)."""
+    weight = np.where(np.abs(residual_s) <= GATE_S, noise.weight_of(residual_s, f.hyper.toa_sigma_s), 0.0)
+    sigma = float(np.sqrt(np.sum(weight * residual_s**2) / max(np.sum(weight), 1.0)))
+    sigma = float(np.clip(sigma, kalman.Hyper.LOWER[2], sigma_cap_s))
+    return dataclasses.replace(f, hyper=dataclasses.replace(f.hyper, toa_sigma_s=sigma)), weight
+
+
+def _median_offsets(layout: ArrayLayout, floats: Sequence[MissionFloat], priors: kalman.KalmanPriors) -> NDArray:
+    """theta at the tables as given but each source's offset at the median of its arrivals'
+    residuals over every float: a source whose offset is tens of seconds off shifts all its
+    arrivals alike, which the arrivals' weights, fitted per arrival, would otherwise take for
+    multipath on every one of them (and the fit would never see the source)."""
+    theta = np.zeros(layout.size)
+    sources, residuals = [], []
+    for f in floats:
+        u = np.zeros(f.problem.n_unknowns)
+        residuals.append(kalman.linearise(f.problem, u, np.ones(f.n_arrivals), priors).toa_residual_s)
+        sources.append(np.searchsorted(layout.sources, f.heard)[f.problem.beacon])
+    where, r = np.concatenate(sources), np.concatenate(residuals)
+    for g in range(len(layout.sources)):
+        theta[layout.column(0, g)] = np.median(r[where == g])
+    return theta
+
+
+def fit_array(
+    floats: Sequence[MissionFloat],
+    config: Config,
+    released: NDArray[np.bool_] | None = None,
+    start: ArrayFit | None = None,
+    priors: kalman.KalmanPriors = kalman.DEFAULT_PRIORS,
+    iterations: int = ITERATIONS,
+) -> ArrayFit:
+    """Gauss-Newton over the mission (module docstring), from `start` (a previous fit of
+    the same floats) or the tables as given: each step reduces every float to the array
+    block, solves it and back-substitutes (the step shortened where a source would move
+    beyond `STEP_LIMITS`), then refits the arrivals' weights and each float's TOA sd from
+    the residuals the step started from (iteratively reweighted, one step behind).
+    `released` (G, 5): the source unknowns under wide priors."""
+    if start is None:
+        layout = ArrayLayout.of(floats)
+        floats = referred(list(floats), layout.sources, layout.mid_days)
+        theta, own = _median_offsets(layout, floats, priors), [np.zeros(f.n_own) for f in floats]
+        weight = [np.ones(f.n_arrivals) for f in floats]
+    else:
+        layout, floats, theta, own, weight = start.layout, start.floats, start.theta, start.own, start.weight
+    s0 = 1.0 / config.model.sound_speed_m_s
+    array_priors = ArrayPriors.of(layout, priors, s0, released)
+    information = np.diag(1.0 / array_priors.sd() ** 2)
+    columns = [layout.float_columns(f) for f in floats]
+    noise = [MultipathEM(config.model) for _ in floats]
+    for step in range(iterations + 1):
+        steps = [
+            _float_step(f, np.concatenate([x, theta[c]]), w, priors, c)
+            for f, c, x, w in zip(floats, columns, own, weight, strict=True)
+        ]
+        blocks, residuals = [b for b, _ in steps], [r for _, r in steps]
+        solution = solve_mission(blocks, information, -information @ theta)
+        if step == iterations:  # the covariance at the solution, no further move
+            break
+        scale = _step_scale(solution.d_theta, layout)
+        theta = theta + scale * solution.d_theta
+        own = [x + scale * dx for x, dx in zip(own, solution.d_own, strict=True)]
+        cap = SIGMA_CAP * config.model.toa_sigma_s
+        refits = [_refitted_noise(f, r, em, cap) for f, r, em in zip(floats, residuals, noise, strict=True)]
+        floats, weight = [f for f, _ in refits], [w for _, w in refits]
+    return ArrayFit(layout, floats, theta, solution.covariance(), own, weight, residuals, array_priors, s0)

@@ -1,0 +1,126 @@
+"""A mission's array fit written out: `array.csv` (per source and field: the value given, the
+mission's estimate and sd, the floats and arrivals it rests on, the outcome),
+`beacons-calibrated.csv` (the user's beacons.csv with only the decided cells changed) and
+`array.png` (`plots.array_residuals`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..calibrate import kalman
+from ..io.atomic import write_text_atomic
+from ..io.table_text import with_cells
+from ..io.writers import csv_text
+from ..plots.array_residuals import SourcePanel, plot_array_residuals
+from .array import MissionArray
+
+ARRAY_NAME = "array.csv"
+CALIBRATED_NAME = "beacons-calibrated.csv"
+ARRAY_PLOT_NAME = "array.png"
+_DIGITS = {"offset_s": 3, "drift_s_per_day": 5, "lat": 4, "lon": 4}
+
+
+def _text(value: float | str | None, lat_lon: tuple[float, float] | None) -> str:
+    if lat_lon is not None:
+        return f"{lat_lon[0]:.4f} {lat_lon[1]:.4f}"
+    return "" if value is None else str(value)
+
+
+ARRAY_COLUMNS = ("source", "field", "given", "estimated", "shift", "sd", "unit", "outcome", "calibrated", "floats",
+                 "arrivals", "line")  # fmt: skip
+
+
+def array_rows(array: MissionArray) -> list[dict[str, Any]]:
+    """`array.csv`'s rows: per source and field, given, estimated (the arrivals' value), sd,
+    unit, outcome, whether the calibrated table uses the estimate, floats and arrivals."""
+    decided = {(v.check.id, v.check.field) for v in array.decided()}
+    rows = []
+    for v in array.values:
+        c = v.check
+        rows.append(
+            {
+                "source": c.id,
+                "field": c.field,
+                "given": _text(c.given, c.given_lat_lon),
+                "estimated": _text(c.supported, c.supported_lat_lon),
+                "shift": "" if c.field != "position" or c.supported is None else c.supported,
+                "sd": "" if c.sd is None else c.sd,
+                "unit": "lat lon" if c.field == "position" else c.unit,
+                "outcome": c.outcome,
+                "calibrated": (c.id, c.field) in decided,
+                "floats": v.floats,
+                "arrivals": round(v.arrivals, 1),
+                "line": "" if c.line is None else c.line,
+            }
+        )
+    return rows
+
+
+def calibrated_text(array: MissionArray, given_text: str) -> str:
+    """The user's beacons.csv text with each decided value's cells replaced."""
+    edits = []
+    for v in array.decided():
+        c = v.check
+        if c.field == "position" and c.supported_lat_lon is not None:
+            cells = {"lat": f"{c.supported_lat_lon[0]:.4f}", "lon": f"{c.supported_lat_lon[1]:.4f}"}
+        else:
+            cells = {c.field: f"{float(c.supported):.{_DIGITS[c.field]}f}"}  # type: ignore[arg-type]
+        edits.append((c.line or 0, c.id, cells))
+    return with_cells(given_text, edits)
+
+
+def source_panels(array: MissionArray) -> list[SourcePanel]:
+    """Per source, every float's residuals with the tables as given and after the fit."""
+    fit = array.fit
+    parts: list[list[tuple]] = [[] for _ in fit.layout.sources]
+    for k, f in enumerate(fit.floats):
+        at_given = np.zeros(f.problem.n_unknowns)
+        lin = kalman.linearise(f.problem, at_given, np.ones(f.n_arrivals), kalman.DEFAULT_PRIORS, array_priors=False)
+        where = np.searchsorted(fit.layout.sources, f.heard)[f.problem.beacon]
+        times = f.problem.time[f.problem.node]
+        for g in np.unique(where):
+            sel = where == g
+            parts[g].append((times[sel], np.full(sel.sum(), k), lin.toa_residual_s[sel], fit.toa_residual_s[k][sel]))
+    titles = _titles(array)
+    return [
+        SourcePanel(titles[g], *(np.concatenate(column) for column in zip(*part, strict=True)))
+        for g, part in enumerate(parts)
+        if part
+    ]
+
+
+def _titles(array: MissionArray) -> list[str]:
+    """Each source's id and the values the mission decided for it."""
+    names = [str(array.beacons.beacon_id[row]) for row in array.fit.layout.sources]
+    for v in array.decided():
+        c = v.check
+        change = f"{c.supported} km moved" if c.field == "position" else f"{c.given} -> {c.supported} {c.unit}"
+        names[v.source] += f"\n{c.field} {change}"
+    return names
+
+
+def write_array_outputs(
+    array: MissionArray, out_dir: Path, beacons_path: Path, plots: bool = True, keep_calibrated: bool = False
+) -> list[Path]:
+    """`array.csv`, `beacons-calibrated.csv` (when the mission decided a value; an old one is
+    removed otherwise; left as it is with `keep_calibrated`: it holds the decisions already,
+    `MissionArray.settled_in`) and `array.png` in `out_dir`, each written atomically."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out_dir / ARRAY_NAME, csv_text(ARRAY_COLUMNS, array_rows(array)))
+    written = [out_dir / ARRAY_NAME]
+    calibrated = out_dir / CALIBRATED_NAME
+    if array.decided() and keep_calibrated and calibrated.is_file():
+        written.append(calibrated)
+    elif array.decided():
+        with open(beacons_path, encoding="utf-8", newline="") as table:  # its own line ends
+            write_text_atomic(calibrated, calibrated_text(array, table.read()))
+        written.append(calibrated)
+    else:
+        calibrated.unlink(missing_ok=True)
+    if plots:
+        names = [f.float_id for f in array.fit.floats]
+        written.append(plot_array_residuals(out_dir / ARRAY_PLOT_NAME, source_panels(array), names))
+    return written

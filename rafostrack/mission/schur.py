@@ -1,0 +1,104 @@
+"""The mission's normal equations, block-arrow, solved by reduction to the array block.
+
+Float f's own unknowns x_f (its nodes, banded, then its own statics) couple with nothing of
+another float; every float couples with the array's unknowns theta (each source's offset,
+drift, sound-speed deviation and position, the shared sound speed). The Gauss-Newton system
+
+    [N_1              C_1 ] [dx_1 ]   [b_1  ]
+    [      ...        ... ] [ ... ] = [ ... ]
+    [            N_F  C_F ] [dx_F ]   [b_F  ]
+    [C_1'  ...  C_F'   E  ] [dth  ]   [b_th ]
+
+with E = P + sum_f E_f (P the array's prior information, E_f float f's own terms on the
+array's columns) is solved as bundle adjustment solves its cameras and points: each x_f
+eliminated on its own (its N_f is `BorderedBanded`: banded nodes, a dense border),
+
+    S = P + sum_f (E_f - C_f' N_f^-1 C_f),    r = b_th + sum_f (b_f,th - C_f' N_f^-1 b_f),
+    S dth = r,    dx_f = N_f^-1 (b_f - C_f dth).
+
+Each float's reduction costs O(n_f w m_f) for its n_f unknowns, band half-width w and the
+m_f array columns it touches; the array system O(M^3) once. S^-1 is the array's posterior
+covariance (of the linearised model).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import sparse
+from scipy.linalg import cho_factor, cho_solve
+
+from ..calibrate.banded import BorderedBanded
+
+
+@dataclass(frozen=True)
+class FloatBlock:
+    """One float's rows of the mission's normal equations: its own block N_f factored, its
+    coupling C_f to the array columns it touches, its terms E_f on them, the right-hand
+    sides, and where those columns are in the mission's theta."""
+
+    own: BorderedBanded  # N_f
+    coupling: NDArray[np.float64]  # (n_f, m_f) C_f
+    corner: NDArray[np.float64]  # (m_f, m_f) E_f
+    own_rhs: NDArray[np.float64]  # (n_f,) b_f
+    array_rhs: NDArray[np.float64]  # (m_f,) b_f,th
+    columns: NDArray[np.intp]  # (m_f,) index in theta of each array column
+
+    @classmethod
+    def of(
+        cls, normal: sparse.spmatrix, rhs: NDArray, n_band: int, bandwidth: int, n_own: int, columns: NDArray
+    ) -> FloatBlock:
+        """Split a float's normal matrix and right-hand side, ordered (its n_band banded
+        unknowns, its other own unknowns up to n_own, then the array's), into the blocks."""
+        normal = sparse.csr_matrix(normal)
+        own = BorderedBanded(normal[:n_own, :n_own], n_band, bandwidth)
+        coupling = normal[:n_own, n_own:].toarray()
+        corner = normal[n_own:, n_own:].toarray()
+        return cls(own, coupling, corner, rhs[:n_own], rhs[n_own:], np.asarray(columns, dtype=np.intp))
+
+    def reduced(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """E_f - C_f' N_f^-1 C_f and b_f,th - C_f' N_f^-1 b_f: the float's terms on theta
+        with its own unknowns eliminated."""
+        through = self.own.solve(np.column_stack([self.coupling, self.own_rhs]))
+        reduced = self.corner - np.einsum("nk,nl->kl", self.coupling, through[:, :-1])
+        return 0.5 * (reduced + reduced.T), self.array_rhs - np.einsum("nk,n->k", self.coupling, through[:, -1])
+
+    def back_substituted(self, d_theta: NDArray) -> NDArray[np.float64]:
+        """dx_f = N_f^-1 (b_f - C_f dth_f), dth_f the float's columns of dth."""
+        return self.own.solve(self.own_rhs - self.coupling @ d_theta[self.columns])
+
+
+@dataclass(frozen=True)
+class ArraySolution:
+    """The mission system's solution: the array's step, each float's, and S factored."""
+
+    d_theta: NDArray[np.float64]
+    d_own: list[NDArray[np.float64]]
+    schur: tuple[NDArray[np.float64], bool]  # cho_factor of S
+
+    def covariance(self) -> NDArray[np.float64]:
+        """S^-1: the array's posterior covariance (of the linearised model)."""
+        return cho_solve(self.schur, np.eye(len(self.d_theta)))
+
+
+def array_system(
+    blocks: Sequence[FloatBlock], prior_information: NDArray, prior_rhs: NDArray
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """S and r (module docstring): the floats' reduced terms added into the array's prior."""
+    schur, rhs = np.array(prior_information, dtype=float), np.array(prior_rhs, dtype=float)
+    for block in blocks:
+        reduced, reduced_rhs = block.reduced()
+        schur[np.ix_(block.columns, block.columns)] += reduced
+        np.add.at(rhs, block.columns, reduced_rhs)
+    return schur, rhs
+
+
+def solve_mission(blocks: Sequence[FloatBlock], prior_information: NDArray, prior_rhs: NDArray) -> ArraySolution:
+    """The whole system's solution: theta's from S, then each float's by back-substitution."""
+    schur, rhs = array_system(blocks, prior_information, prior_rhs)
+    factor = cho_factor(schur, lower=True)
+    d_theta = cho_solve(factor, rhs)
+    return ArraySolution(d_theta, [b.back_substituted(d_theta) for b in blocks], factor)

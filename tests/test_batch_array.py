@@ -1,0 +1,82 @@
+"""The mission rounds of a batch (`batch.array_rounds`): a table with two source offsets
+wrong is fitted on every float, the decided table written and tracked with, and a rerun on
+the same inputs tracks nothing again."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from support import simulated_mission_dir
+
+from rafostrack.cli import main
+
+WRONG = {"B3": 30.0, "B5": -40.0}  # s added to the true offsets
+
+
+def _batch(root: Path, out: Path, *flags: str):
+    return CliRunner().invoke(main, ["batch", str(root), "--out", str(out), "--no-plots", "--jobs", "2", *flags])
+
+
+@pytest.fixture(scope="module")
+def faulted(tmp_path_factory) -> tuple[Path, dict[str, float]]:
+    """A simulated mission of three 40-day floats whose beacons.csv has two offsets wrong;
+    the true offsets."""
+    root = tmp_path_factory.mktemp("array") / "root"
+    mission = simulated_mission_dir(root / "m", seed=3, days=40, particles=200)
+    (root / "m" / "sim1.csv").unlink()  # the simulator's one float: replaced by three below
+    result = CliRunner().invoke(main, ["simulate", str(mission), "--days", "40", "--seed", "3", "--n-floats", "3"])
+    assert result.exit_code == 0, result.output
+    with open(mission / "rafostrack.toml", "a") as fh:
+        fh.write("\n[filter]\nparticles = 200\n")
+    table = mission / "beacons.csv"
+    rows = list(csv.DictReader(table.open()))
+    truth = {r["beacon_id"]: float(r["offset_s"]) for r in rows}
+    text = table.read_text().splitlines(keepends=True)
+    for k, row in enumerate(rows, start=1):
+        if row["beacon_id"] in WRONG:
+            fields = text[k].split(",")
+            fields[3] = f"{truth[row['beacon_id']] + WRONG[row['beacon_id']]:g}"
+            text[k] = ",".join(fields)
+    table.write_text("".join(text))
+    return root, truth
+
+
+@pytest.mark.slow
+def test_the_mission_decides_the_wrong_offsets_tracks_with_them_and_a_rerun_tracks_nothing(faulted, tmp_path):
+    root, truth = faulted
+    out = tmp_path / "out"
+    result = _batch(root, out)
+    assert result.exit_code == 0, result.output
+    rows = {(r["source"], r["field"]): r for r in csv.DictReader((out / "m" / "array.csv").open())}
+    decided = {key for key, r in rows.items() if r["calibrated"] == "True"}
+    assert decided == {(b, "offset_s") for b in WRONG}
+    for source in WRONG:
+        row = rows[source, "offset_s"]
+        assert row["outcome"] == "contradicted"
+        assert abs(float(row["estimated"]) - truth[source]) < 2 * float(row["sd"])
+    calibrated = {r["beacon_id"]: r for r in csv.DictReader((out / "m" / "beacons-calibrated.csv").open())}
+    given = {r["beacon_id"]: r for r in csv.DictReader((root / "m" / "beacons.csv").open())}
+    assert {b for b in given if given[b] != calibrated[b]} == set(WRONG)
+    for float_dir in sorted((out / "m").glob("sim*")):
+        run = json.loads((float_dir / "run.json").read_text())
+        assert Path(run["inputs"]["beacons"]["path"]).name == "beacons-calibrated.csv"
+    record = json.loads((out / "m" / "array.json").read_text())
+    assert record["rounds"][-1]["settled"] and record["decided"] == sorted(f"{b} offset_s" for b in WRONG)
+    again = _batch(root, out)
+    assert again.exit_code == 0 and "0 processed, 3 skipped" in again.output, again.output
+
+
+@pytest.mark.slow
+def test_without_the_array_fit_each_float_checks_alone(faulted, tmp_path):
+    root, _ = faulted
+    out = tmp_path / "out"
+    result = _batch(root, out, "--no-array-fit")
+    assert result.exit_code == 0, result.output
+    assert not (out / "m" / "array.csv").exists() and not (out / "m" / "beacons-calibrated.csv").exists()
+    for float_dir in sorted((out / "m").glob("sim*")):
+        run = json.loads((float_dir / "run.json").read_text())
+        assert Path(run["inputs"]["beacons"]["path"]).name == "beacons.csv"

@@ -1,0 +1,152 @@
+"""The mission's array fit: the block-arrow solve against a dense least-squares solve, and
+a simulated mission whose table carries several faults at once."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy import sparse
+from support import truth_estimate
+
+from rafostrack.calibrate import kalman
+from rafostrack.calibrate.kalman_problem import NODE
+from rafostrack.calibrate.metadata_checks import CONSISTENT, CONTRADICTED
+from rafostrack.config import load_config
+from rafostrack.mission.array import calibrated_array
+from rafostrack.mission.array_fit import ArrayLayout, ArrayPriors
+from rafostrack.mission.floats import BANDWIDTH, mission_float, referred
+from rafostrack.mission.schur import FloatBlock, solve_mission
+from rafostrack.model.geodesy import displace
+from rafostrack.sim.scenarios import synthetic_scenario
+from rafostrack.sim.simulate import simulate_mission
+
+CONFIG = load_config()
+N_BEACONS = 8
+
+
+def _mission(n_floats: int, days: int, seed: int = 5):
+    beacons, infos = synthetic_scenario(n_beacons=N_BEACONS, days=days, rng=seed, n_floats=n_floats)
+    beacons = dataclasses.replace(beacons, source_file="beacons.csv", source_line=np.arange(2, N_BEACONS + 2))
+    infos = [dataclasses.replace(i, max_signals=8) for i in infos]
+    model = dataclasses.replace(CONFIG.model, toa_sigma_s=1.0, clutter_rate=0.5)
+    return beacons, simulate_mission(beacons, infos, model, np.random.default_rng(seed + 6)).floats
+
+
+def _floats(beacons, simulated):
+    built = [mission_float(s.info.float_id, truth_estimate(s), beacons, s.info, CONFIG) for s in simulated]
+    assert all(f is not None for f in built)
+    return built
+
+
+def _dense_rows(lin, hyper, columns, n_total, offset):
+    """A float's whitened rows as a dense Jacobian over the mission's unknowns (its own at
+    `offset`, its array columns at theta's place after every float's own)."""
+    jac_a, r_a = lin.arrival_system
+    jac_f, r_f = lin.motion_rows(hyper).system(lin.problem.n_unknowns)
+    fixed_jac = sparse.vstack([jac_a / hyper.toa_sigma_s, jac_f])
+    rows = sparse.csr_matrix(fixed_jac).toarray()
+    resid = np.concatenate([r_a / hyper.toa_sigma_s, r_f])
+    n_own = rows.shape[1] - len(columns)
+    out = np.zeros((rows.shape[0], n_total))
+    out[:, offset : offset + n_own] = rows[:, :n_own]
+    out[:, columns] += rows[:, n_own:]
+    return out, resid
+
+
+def test_block_arrow_solve_equals_a_dense_least_squares_solve():
+    """Three floats' rows stacked into one dense Jacobian with the array's prior rows: the
+    least-squares step equals the Schur-complement solve's, for theta and every float."""
+    beacons, simulated = _mission(3, 20)
+    floats = _floats(beacons, simulated)
+    layout = ArrayLayout.of(floats)
+    floats = referred(floats, layout.sources, layout.mid_days)
+    rng = np.random.default_rng(1)
+    theta = rng.normal(0.0, 0.3, layout.size) * np.r_[1e-7, np.tile([1.0, 1e-3, 1e-7, 1.0, 1.0], len(layout.sources))]
+    prior_sd = ArrayPriors.of(layout, kalman.DEFAULT_PRIORS, 1 / 1480.0).sd()
+    n_own_total = sum(f.n_own for f in floats)
+    n_total = n_own_total + layout.size
+    blocks, dense, offset = [], [], 0
+    for f in floats:
+        columns = layout.float_columns(f)
+        u = np.concatenate([rng.normal(0.0, 0.5, f.n_own), theta[columns]])
+        lin = kalman.linearise(f.problem, u, np.ones(f.n_arrivals), kalman.DEFAULT_PRIORS, array_priors=False)
+        normal = lin.normal(f.hyper)
+        blocks.append(FloatBlock.of(normal.jtj, -normal.jtr, NODE * f.problem.n_nodes, BANDWIDTH, f.n_own, columns))
+        rows, r = _dense_rows(lin, f.hyper, n_own_total + columns, n_total, offset)
+        fixed = sparse.csr_matrix(lin.fixed.jtj).toarray()  # end fix and the mean current's prior, as normal terms
+        dense.append((rows, r, fixed, lin.fixed.jtr, offset, columns))
+        offset += f.n_own
+    solution = solve_mission(blocks, np.diag(prior_sd**-2.0), -(prior_sd**-2.0) * theta)
+    # Dense: N = J'J + the fixed terms + the prior, all placed in the mission's unknowns.
+    normal = np.zeros((n_total, n_total))
+    rhs = np.zeros(n_total)
+    for rows, r, fixed, fixed_jtr, at, columns in dense:
+        normal += rows.T @ rows
+        rhs -= rows.T @ r
+        place = np.r_[at : at + fixed.shape[0] - len(columns), n_own_total + columns]
+        normal[np.ix_(place, place)] += fixed
+        rhs[place] -= fixed_jtr
+    array = np.arange(n_own_total, n_total)
+    normal[array, array] += prior_sd**-2.0
+    rhs[array] -= prior_sd**-2.0 * theta
+    step = np.linalg.solve(normal, rhs)
+    np.testing.assert_allclose(solution.d_theta, step[array], rtol=1e-6, atol=1e-9 * np.abs(step[array]).max())
+    own = np.concatenate(solution.d_own)
+    np.testing.assert_allclose(own, step[:n_own_total], rtol=1e-6, atol=1e-8 * np.abs(step[:n_own_total]).max())
+    np.testing.assert_allclose(
+        solution.covariance(), np.linalg.inv(normal)[np.ix_(array, array)], rtol=1e-6, atol=1e-14
+    )
+
+
+@pytest.fixture(scope="module")
+def mission():
+    return _mission(6, 90)
+
+
+def _faulted(beacons):
+    """Three values wrong at once: an offset +25 s, a drift +0.035 s/day, a position 18 km east."""
+    offset = beacons.offset_s + np.eye(N_BEACONS)[1] * 25.0
+    drift = beacons.drift_s_per_day + np.eye(N_BEACONS)[4] * 0.035
+    lat, lon = displace(beacons.lat[6], beacons.lon[6], 18.0, 0.0)
+    at = np.arange(N_BEACONS) == 6
+    return dataclasses.replace(
+        beacons,
+        offset_s=offset,
+        drift_s_per_day=drift,
+        lat=np.where(at, lat, beacons.lat),
+        lon=np.where(at, lon, beacons.lon),
+    )
+
+
+def test_a_mission_names_several_faults_at_once_and_recovers_them_within_two_sd(mission):
+    beacons, simulated = mission
+    faulted = _faulted(beacons)
+    array = calibrated_array(_floats(faulted, simulated), faulted, CONFIG)
+    by_value = {(v.check.id, v.check.field): v.check for v in array.values}
+    wrong = {("B2", "offset_s"), ("B5", "drift_s_per_day"), ("B7", "position")}
+    assert {key for key, c in by_value.items() if c.outcome == CONTRADICTED} == wrong
+    assert {(v.check.id, v.check.field) for v in array.decided()} == wrong
+    offset, drift = by_value["B2", "offset_s"], by_value["B5", "drift_s_per_day"]
+    assert abs(offset.supported - beacons.offset_s[1]) < 2 * offset.sd
+    assert abs(drift.supported - beacons.drift_s_per_day[4]) < 2 * drift.sd
+    position = by_value["B7", "position"]
+    north, east = (np.array(position.supported_lat_lon) - (beacons.lat[6], beacons.lon[6])) * (
+        111.0,
+        111.0 * np.cos(np.radians(beacons.lat[6])),
+    )
+    assert np.hypot(north, east) < 2 * position.sd
+    table = array.calibrated_beacons()
+    np.testing.assert_array_equal(
+        table.offset_s[[0, *range(2, N_BEACONS)]], faulted.offset_s[[0, *range(2, N_BEACONS)]]
+    )
+    assert table.offset_s[1] == offset.supported
+
+
+def test_a_mission_with_correct_tables_finds_nothing(mission):
+    beacons, simulated = mission
+    array = calibrated_array(_floats(beacons, simulated), beacons, CONFIG)
+    assert {v.check.outcome for v in array.values} == {CONSISTENT}
+    assert not array.released.any()
+    assert array.decided() == []
