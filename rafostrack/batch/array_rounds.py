@@ -40,7 +40,7 @@ class ArrayRound:
     """What one mission's array fit decided in one round."""
 
     mission: str
-    floats: int
+    floats: int  # those whose arrivals the fit weighed
     decided: list[str]  # "<source> <field>"
     calibrated: Path | None  # the table its floats are to be tracked with (None: as given)
     rms_residual_s: float

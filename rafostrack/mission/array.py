@@ -30,6 +30,7 @@ from .floats import MissionFloat
 MAX_RELEASES = 12
 RELEASE_ITERATIONS = 3  # Gauss-Newton steps after a release, from the previous fit
 TRUSTED_RMS = 3.0
+TRUSTED_SHARE = 0.25
 
 
 def local_distance_km(lat: NDArray, lon: NDArray, lat0: NDArray, lon0: NDArray) -> NDArray[np.float64]:
@@ -53,11 +54,18 @@ class MissionArray:
         r, w = np.concatenate(self.fit.toa_residual_s), np.concatenate(self.fit.weight)
         return float(np.sqrt(np.sum(w * r**2) / max(float(np.sum(w)), 1.0)))
 
+    def floats_used(self) -> int:
+        """The floats whose arrivals the fit weighs (a float that does not fit the array
+        has none: `array_fit._refitted_noise`)."""
+        return sum(bool(np.any(w > 0)) for w in self.fit.weight)
+
     def trusted(self, toa_sigma_s: float) -> bool:
-        """Whether the floats fit one array: the weighted rms residual within `TRUSTED_RMS`
-        times the configured TOA sd (floats whose tracks are lost, or labels not the
-        sources', fit none; the mission then decides nothing)."""
-        return self.rms_residual_s() <= TRUSTED_RMS * toa_sigma_s
+        """Whether the floats fit one array: at least `TRUSTED_SHARE` of them weighed, their
+        weighted rms residual within `TRUSTED_RMS` times the configured TOA sd (floats
+        whose tracks are lost, or labels not the sources', fit none; the mission then
+        decides nothing)."""
+        enough = self.floats_used() >= max(1, TRUSTED_SHARE * len(self.fit.floats))
+        return enough and self.rms_residual_s() <= TRUSTED_RMS * toa_sigma_s
 
     def decided(self) -> list[ArrayValue]:
         """The values the mission contradicts and estimates (released, fitted again); none

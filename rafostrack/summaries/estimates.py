@@ -224,7 +224,7 @@ def split_modes(cloud: Cloud, weights: NDArray, extra_cov_km2: NDArray, split: S
     """A split window's two modes (`smoothing.split`): the particles nearer each filter's
     mean, the heavier first (where the join put no weight near a filter's mean, that mode is
     the filter's mean itself, of unknown spread); the whole cloud's covariance widened by
-    the split's spread."""
+    the split's spread, and its mean the position reported (`Modes.split`)."""
     side = sides(cloud, split)
     parts = []
     for s, (lat, lon) in ((0, split.forward), (1, split.backward)):
@@ -239,7 +239,7 @@ def split_modes(cloud: Cloud, weights: NDArray, extra_cov_km2: NDArray, split: S
     whole = summarise(cloud.lat, cloud.lon, weights)
     whole = Gaussian2D(whole.lat, whole.lon, whole.cov_km2 + extra_cov_km2 + split.spread_km2)
     total = w1 + w2
-    return Modes(whole, first, second, w1 / total, w2 / total, split.distance_km, True)
+    return Modes(whole, first, second, w1 / total, w2 / total, split.distance_km, True, split=True)
 
 
 def _window_label_probs(

@@ -58,11 +58,18 @@ class Modes:
     separation_km: float
     ambiguous: bool
     parted: bool = False  # the two parts lie in regions parted by forbidden ground (`groups`)
+    # The modes are the two-filter smoother's two filters held apart (`smoothing.split`): the
+    # join weighed them by their evidence, which picks the wrong one too often to report it
+    # alone; the whole posterior's mean is reported, its sd covering both.
+    split: bool = False
 
     @property
     def position(self) -> Gaussian2D:
         """The position to report: the heavier mode where there are two separate ones or the
-        posterior is parted (its mean may lie on the forbidden ground between), else the whole."""
+        posterior is parted (its mean may lie on the forbidden ground between), the whole
+        where the modes are a split's, else the whole."""
+        if self.split:
+            return self.whole
         return self.first if self.ambiguous or self.parted else self.whole
 
 
