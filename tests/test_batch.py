@@ -526,3 +526,16 @@ def test_progress_bar_on_a_terminal_and_lines_otherwise():
         "rafostrack batch: [1/2] m1/sim1 processed in 1.0 s (new)",
         "rafostrack batch: [2/2] m1/sim2 failed: sim2.csv: line 3: bad",
     ]
+
+
+def test_each_round_counts_its_own_floats():
+    """A batch's second round (the mission's array) numbers its floats from 1 again."""
+    stream = io.StringIO()
+    reporter = b.Reporter(stream, tty=False)
+    for total in (3, 2):
+        reporter.start(total)
+        for k in range(total):
+            reporter.done(b.FloatOutcome("m", f"f{k}", b.PROCESSED, "new", seconds=1.0))
+        reporter.finish()
+    lines = [line for line in stream.getvalue().splitlines() if "] m/" in line]
+    assert [line.split("]")[0].split("[")[1] for line in lines] == ["1/3", "2/3", "3/3", "1/2", "2/2"]

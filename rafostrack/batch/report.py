@@ -102,7 +102,9 @@ class Reporter:
         self.stream.flush()
 
     def start(self, total: int) -> None:
+        """Count `total` floats from 0 (each round of a batch counts its own)."""
         self.total = total
+        self.counts = {PROCESSED: 0, FAILED: 0}
         self.started = time.monotonic()
         if self.tty and total:
             self._bar = tqdm(
