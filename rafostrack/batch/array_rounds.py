@@ -138,9 +138,11 @@ def _record(fitted: ArrayRound, mission: Mission, out: Path, round_: int) -> Non
 
 def round_line(fitted: ArrayRound, round_: int) -> str:
     """One log line of a mission's array fit."""
+    from ..mission.array import UNTRUSTED_NOTE
+
     what = f"decided {', '.join(fitted.decided)}" if fitted.decided else "no table value decided"
     if not fitted.trusted:
-        what = "the floats do not fit one array (their tracks or labels are off): nothing decided"
+        what = f"{UNTRUSTED_NOTE}: nothing decided"
     if fitted.settled:
         what += "; settled: the floats were tracked with these values"
     elif round_ == MAX_ROUNDS and fitted.decided:

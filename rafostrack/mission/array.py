@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..calibrate import kalman
-from ..calibrate.metadata_checks import CONTRADICTED
+from ..calibrate.metadata_checks import CONTRADICTED, UNDETERMINED, MetadataCheck
 from ..config import Config
 from ..domain import BeaconTable
 from ..model.geodesy import local_offsets_km
@@ -31,6 +31,7 @@ MAX_RELEASES = 12
 RELEASE_ITERATIONS = 3  # Gauss-Newton steps after a release, from the previous fit
 TRUSTED_RMS = 3.0
 TRUSTED_SHARE = 0.25
+UNTRUSTED_NOTE = "the floats do not fit one array (their tracks or labels are off)"
 
 
 def local_distance_km(lat: NDArray, lon: NDArray, lat0: NDArray, lon0: NDArray) -> NDArray[np.float64]:
@@ -135,7 +136,17 @@ def calibrated_array(floats: Sequence[MissionFloat], beacons: BeaconTable, confi
         fit = fit_array(fit.floats, config, released, start=fit, priors=priors, iterations=RELEASE_ITERATIONS)
         values = array_values(fit, beacons, config.checks)
     array = MissionArray(fit, values, released, beacons)
-    return dataclasses.replace(array, is_trusted=array.trusted(config.model.toa_sigma_s))
+    if array.trusted(config.model.toa_sigma_s):
+        return array
+    undecided = [dataclasses.replace(v, check=_untrusted(v.check)) for v in values]
+    return dataclasses.replace(array, values=undecided, is_trusted=False)
+
+
+def _untrusted(check: MetadataCheck) -> MetadataCheck:
+    """A contradicted value of a fit the floats do not agree on: undetermined."""
+    if check.outcome != CONTRADICTED:
+        return check
+    return dataclasses.replace(check, outcome=UNDETERMINED, note=UNTRUSTED_NOTE)
 
 
 __all__ = ["MAX_RELEASES", "MissionArray", "array_priors", "calibrated_array"]
