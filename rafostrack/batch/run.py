@@ -199,15 +199,7 @@ def _array_rounds(
                 tables[mission.name] = result.calibrated
         if round_ == MAX_ROUNDS or not fitted:
             break
-        tasks, _ = plan(
-            fitted,
-            options.out,
-            config_files=options.config_files,
-            overrides=options.overrides,
-            plots=options.plots,
-            run_id=lock.run_id,
-            beacons_of=tables,
-        )
+        tasks, _ = _planned(options, fitted, lock, tables, force=False)
         if not tasks:
             break
         reporter.log(f"round {round_ + 1}: tracking {len(tasks)} float(s) again with their mission's array")
@@ -215,6 +207,23 @@ def _array_rounds(
         tasks = [dataclasses.replace(task, why=why) for task in tasks]
         outcomes = replaced(outcomes, _track(tasks, options, reporter, client))
     return outcomes
+
+
+def _planned(
+    options: BatchOptions, missions: list[Mission], lock: BatchLock, tables: dict[str, Path], force: bool
+) -> tuple[list[FloatTask], list[FloatOutcome]]:
+    """`plan` of the missions' floats with the run's options, each mission's floats tracked
+    with its table in `tables` (else its beacons.csv)."""
+    return plan(
+        missions,
+        options.out,
+        config_files=options.config_files,
+        overrides=options.overrides,
+        plots=options.plots,
+        force=force,
+        run_id=lock.run_id,
+        beacons_of=tables,
+    )
 
 
 def _plan_floats(
@@ -231,16 +240,7 @@ def _plan_floats(
         if mission.orphans:
             names = ", ".join(f"{f}.csv" for f in mission.orphans)
             reporter.log(f"{mission.name}: ignoring {names} (no row in floats.csv)", console=False)
-    tasks, known = plan(
-        missions,
-        options.out,
-        config_files=options.config_files,
-        overrides=options.overrides,
-        plots=options.plots,
-        force=options.force,
-        run_id=lock.run_id,
-        beacons_of=tables,
-    )
+    tasks, known = _planned(options, missions, lock, tables, force=options.force)
     skipped = sum(o.status == SKIPPED for o in known)
     if not tasks:  # nothing to run: no worker starts
         where = ""

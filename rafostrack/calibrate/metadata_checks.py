@@ -85,6 +85,7 @@ __all__ = [
     "position_checks",
     "shift_check",
     "source_information",
+    "source_timing_checks",
     "timing_checks",
     "undecided_note",
     "warnings_of",
@@ -319,23 +320,33 @@ def _source_checks(
         prior_sd = np.array([offset_sd[h], drift_sd[h], *_clock_sd(problem)])
         joint = data_only(*post.block(index), prior_sd) if judged[h] else None
         arrivals = None if joint is None else (joint[0][:2], joint[1][:2, :2])
-        file, line, name = beacon_source(beacons, int(row))
-        at_epoch = np.array([1.0, -mid_days[h]])  # offset at the epoch = a - d mid
-        values = (
-            ("offset_s", float(beacons.offset_s[row]), at_epoch, checks.offset_tolerance_s, "s"),
-            ("drift_s_per_day", float(beacons.drift_s_per_day[row]), np.array([0.0, 1.0]),
-             checks.drift_tolerance_s_per_day, "s/day"),
-        )  # fmt: skip
-        for field, given, weights, tolerance, unit in values:
-            if arrivals is None:
-                found.append(MetadataCheck(file, line, name, field, given, None, None, unit, UNDETERMINED))
-                continue
-            correction = float(weights @ arrivals[0])
-            sd_d = float(np.sqrt(weights @ arrivals[1] @ weights))
-            outcome = outcome_of(correction, sd_d, tolerance, checks.z_score)
-            digits = 3 if unit == "s" else 5
-            found.append(MetadataCheck(file, line, name, field, given, round(given + correction, digits),
-                                       round(sd_d, digits), unit, outcome))  # fmt: skip
+        found += source_timing_checks(beacons, int(row), arrivals, float(mid_days[h]), checks)
+    return found
+
+
+def source_timing_checks(
+    beacons: BeaconTable, row: int, arrivals: tuple[NDArray, NDArray] | None, mid_day: float, checks: ChecksConfig
+) -> list[MetadataCheck]:
+    """A source's offset (at its epoch: o = a - d mid, `mid_day` days after it) and drift
+    from the arrivals' joint estimate `arrivals` (mean, covariance) of its (a, d)
+    corrections; undetermined without a value when None."""
+    file, line, name = beacon_source(beacons, row)
+    values = (
+        ("offset_s", float(beacons.offset_s[row]), np.array([1.0, -mid_day]), checks.offset_tolerance_s, "s"),
+        ("drift_s_per_day", float(beacons.drift_s_per_day[row]), np.array([0.0, 1.0]),
+         checks.drift_tolerance_s_per_day, "s/day"),
+    )  # fmt: skip
+    found = []
+    for field, given, weights, tolerance, unit in values:
+        if arrivals is None:
+            found.append(MetadataCheck(file, line, name, field, given, None, None, unit, UNDETERMINED))
+            continue
+        correction = float(weights @ arrivals[0])
+        sd_d = float(np.sqrt(weights @ arrivals[1] @ weights))
+        outcome = outcome_of(correction, sd_d, tolerance, checks.z_score)
+        digits = 3 if unit == "s" else 5
+        found.append(MetadataCheck(file, line, name, field, given, round(given + correction, digits),
+                                   round(sd_d, digits), unit, outcome))  # fmt: skip
     return found
 
 

@@ -29,8 +29,8 @@ from ..calibrate.metadata_checks import (
     MetadataCheck,
     beacon_source,
     data_only,
-    outcome_of,
     shift_check,
+    source_timing_checks,
     z_of,
 )
 from ..config import ChecksConfig
@@ -74,31 +74,6 @@ def _block(fit: ArrayFit, source: int, blocks: tuple[int, ...]) -> tuple[NDArray
     return data_only(fit.theta[idx], fit.covariance[np.ix_(idx, idx)], fit.priors.sd()[idx])
 
 
-def _timing_values(
-    fit: ArrayFit, source: int, row: int, beacons: BeaconTable, checks: ChecksConfig, judged: bool
-) -> list[MetadataCheck]:
-    """A source's offset at its epoch and its drift."""
-    file, line, name = beacon_source(beacons, row)
-    joint = _block(fit, source, (0, 1)) if judged else None
-    mid = float(fit.layout.mid_days[source])
-    values = (
-        ("offset_s", float(beacons.offset_s[row]), np.array([1.0, -mid]), checks.offset_tolerance_s, "s", 3),
-        ("drift_s_per_day", float(beacons.drift_s_per_day[row]), np.array([0.0, 1.0]),
-         checks.drift_tolerance_s_per_day, "s/day", 5),
-    )  # fmt: skip
-    found = []
-    for field, given, weights, tolerance, unit, digits in values:
-        if joint is None:
-            found.append(MetadataCheck(file, line, name, field, given, None, None, unit, UNDETERMINED))
-            continue
-        correction = float(weights @ joint[0])
-        sd = float(np.sqrt(weights @ joint[1] @ weights))
-        outcome = outcome_of(correction, sd, tolerance, checks.z_score)
-        found.append(MetadataCheck(file, line, name, field, given, round(given + correction, digits),
-                                   round(sd, digits), unit, outcome))  # fmt: skip
-    return found
-
-
 def plausible(check: MetadataCheck) -> MetadataCheck:
     """`check`, undetermined where its correction lies beyond `PLAUSIBLE`."""
     if check.supported is None or check.given is None or isinstance(check.supported, str):
@@ -116,7 +91,8 @@ def array_values(fit: ArrayFit, beacons: BeaconTable, checks: ChecksConfig) -> l
     found = []
     for g, row in enumerate(fit.layout.sources):
         judged = arrivals[g] >= MIN_SOURCE_ARRIVALS
-        timing = _timing_values(fit, g, int(row), beacons, checks, judged)
+        timing_joint = _block(fit, g, (0, 1)) if judged else None
+        timing = source_timing_checks(beacons, int(row), timing_joint, float(fit.layout.mid_days[g]), checks)
         file, line, name = beacon_source(beacons, int(row))
         given = (float(beacons.lat[row]), float(beacons.lon[row]))
         joint = _block(fit, g, (3, 4, 0, 1)) if judged else None
