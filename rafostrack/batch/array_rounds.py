@@ -40,7 +40,7 @@ class ArrayRound:
     """What one mission's array fit decided in one round."""
 
     mission: str
-    floats: int  # those whose arrivals the fit weighed
+    floats: int  # those that fit the array (`MissionArray.floats_fitting`)
     decided: list[str]  # "<source> <field>"
     calibrated: Path | None  # the table its floats are to be tracked with (None: as given)
     rms_residual_s: float
@@ -103,7 +103,8 @@ def fit_mission(
     keep = settled or (previous is not None and round_ == MAX_ROUNDS)
     write_array_outputs(array, out / mission.name, mission.path / "beacons.csv", plots=plots, keep_calibrated=keep)
     decided = [f"{v.check.id} {v.check.field}" for v in array.decided()]
-    rms = array.rms_residual_s()
+    sigma = tracked[0].problem.config.model.toa_sigma_s
+    rms = array.rms_residual_s(sigma)
     calibrated = out / mission.name / CALIBRATED_NAME
     fitted = ArrayRound(
         mission.name,
@@ -148,8 +149,8 @@ def round_line(fitted: ArrayRound, round_: int) -> str:
     elif round_ == MAX_ROUNDS and fitted.decided:
         what += f"; not settled after {MAX_ROUNDS} rounds: the floats keep the table of the round before"
     return (
-        f"mission {fitted.mission}: array fit, round {round_}, on {fitted.floats} float(s): {what} "
-        f"(weighted rms residual {fitted.rms_residual_s:.2f} s)"
+        f"mission {fitted.mission}: array fit, round {round_}, {fitted.floats} float(s) fitting it: {what} "
+        f"(their weighted rms residual {fitted.rms_residual_s:.2f} s)"
     )
 
 

@@ -50,23 +50,30 @@ class MissionArray:
     beacons: BeaconTable  # as given
     is_trusted: bool = True  # `trusted` at the configured TOA sd
 
-    def rms_residual_s(self) -> float:
-        """The weighted rms of the floats' arrival residuals at the fit."""
-        r, w = np.concatenate(self.fit.toa_residual_s), np.concatenate(self.fit.weight)
+    def _float_rms_s(self) -> NDArray[np.float64]:
+        """Per float, the weighted rms of its arrival residuals at the fit."""
+        return np.array([np.sqrt(np.sum(w * r**2) / max(float(np.sum(w)), 1.0))
+                         for r, w in zip(self.fit.toa_residual_s, self.fit.weight, strict=True)])  # fmt: skip
+
+    def floats_fitting(self, toa_sigma_s: float) -> NDArray[np.bool_]:
+        """The floats whose weighted residuals at the fit lie within `TRUSTED_RMS` times the
+        configured TOA sd (the others' tracks are lost, or their labels not the sources')."""
+        return self._float_rms_s() <= TRUSTED_RMS * toa_sigma_s
+
+    def rms_residual_s(self, toa_sigma_s: float) -> float:
+        """The weighted rms of the fitting floats' arrival residuals at the fit (nan: none)."""
+        fitting = self.floats_fitting(toa_sigma_s)
+        if not fitting.any():
+            return float("nan")
+        r = np.concatenate([r for r, ok in zip(self.fit.toa_residual_s, fitting, strict=True) if ok])
+        w = np.concatenate([w for w, ok in zip(self.fit.weight, fitting, strict=True) if ok])
         return float(np.sqrt(np.sum(w * r**2) / max(float(np.sum(w)), 1.0)))
 
-    def floats_used(self) -> int:
-        """The floats whose arrivals the fit weighs (a float that does not fit the array
-        has none: `array_fit._refitted_noise`)."""
-        return sum(bool(np.any(w > 0)) for w in self.fit.weight)
-
     def trusted(self, toa_sigma_s: float) -> bool:
-        """Whether the floats fit one array: at least `TRUSTED_SHARE` of them weighed, their
-        weighted rms residual within `TRUSTED_RMS` times the configured TOA sd (floats
-        whose tracks are lost, or labels not the sources', fit none; the mission then
-        decides nothing)."""
-        enough = self.floats_used() >= max(1, TRUSTED_SHARE * len(self.fit.floats))
-        return enough and self.rms_residual_s() <= TRUSTED_RMS * toa_sigma_s
+        """Whether the floats fit one array: at least `TRUSTED_SHARE` of them within
+        `TRUSTED_RMS` times the configured TOA sd (floats whose tracks are lost, or labels
+        not the sources', fit none; the mission then decides nothing)."""
+        return bool(self.floats_fitting(toa_sigma_s).sum() >= max(1.0, TRUSTED_SHARE * len(self.fit.floats)))
 
     def decided(self) -> list[ArrayValue]:
         """The values the mission contradicts and estimates (released, fitted again); none

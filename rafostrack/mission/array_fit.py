@@ -150,13 +150,10 @@ def _refitted_noise(
     """The float's arrivals' direct-path weights (multipath by EM; none beyond `GATE_S`:
     an arrival so far off is not the labelled source's, or the float's track is not where
     the float was) and its TOA sd from the weighted residuals, sigma^2 = sum w r^2 / sum w,
-    at most `sigma_cap_s`: a float whose weighted residuals are wider does not fit the
-    array (its track lost, its labels not the sources'), and its arrivals get no weight
-    until a later step's residuals fit."""
+    at most `sigma_cap_s` (a float whose weighted residuals are wider does not fit the
+    array: `MissionArray.floats_fitting`)."""
     weight = np.where(np.abs(residual_s) <= GATE_S, noise.weight_of(residual_s, f.hyper.toa_sigma_s), 0.0)
     sigma = float(np.sqrt(np.sum(weight * residual_s**2) / max(np.sum(weight), 1.0)))
-    if sigma > sigma_cap_s:  # the float does not fit this array: its track or labels are off
-        weight = np.zeros_like(weight)
     sigma = float(np.clip(sigma, kalman.Hyper.LOWER[2], sigma_cap_s))
     return dataclasses.replace(f, hyper=dataclasses.replace(f.hyper, toa_sigma_s=sigma)), weight
 
