@@ -15,6 +15,7 @@ from rafostrack.calibrate.kalman_problem import NODE
 from rafostrack.calibrate.metadata_checks import CONSISTENT, CONTRADICTED
 from rafostrack.config import load_config
 from rafostrack.mission.array import calibrated_array
+from rafostrack.mission.array_checks import array_values
 from rafostrack.mission.array_fit import ArrayLayout, ArrayPriors
 from rafostrack.mission.floats import BANDWIDTH, mission_float, referred
 from rafostrack.mission.schur import FloatBlock, solve_mission
@@ -55,9 +56,10 @@ def _dense_rows(lin, hyper, columns, n_total, offset):
     return out, resid
 
 
-def test_block_arrow_solve_equals_a_dense_least_squares_solve():
-    """Three floats' rows stacked into one dense Jacobian with the array's prior rows: the
-    least-squares step equals the Schur-complement solve's, for theta and every float."""
+@pytest.fixture(scope="module")
+def three_floats():
+    """Three floats' blocks of the mission system at a random point, with the same rows as
+    dense matrices (`_dense_rows`) and the array's prior."""
     beacons, simulated = _mission(3, 20)
     floats = _floats(beacons, simulated)
     layout = ArrayLayout.of(floats)
@@ -76,13 +78,23 @@ def test_block_arrow_solve_equals_a_dense_least_squares_solve():
         blocks.append(FloatBlock.of(normal.jtj, -normal.jtr, NODE * f.problem.n_nodes, BANDWIDTH, f.n_own, columns))
         rows, r = _dense_rows(lin, f.hyper, n_own_total + columns, n_total, offset)
         fixed = sparse.csr_matrix(lin.fixed.jtj).toarray()  # end fix and the mean current's prior, as normal terms
-        dense.append((rows, r, fixed, lin.fixed.jtr, offset, columns))
+        dense.append((rows, r, fixed, lin.fixed.jtr, offset, columns, f.n_own))
         offset += f.n_own
-    solution = solve_mission(blocks, np.diag(prior_sd**-2.0), -(prior_sd**-2.0) * theta)
-    # Dense: N = J'J + the fixed terms + the prior, all placed in the mission's unknowns.
-    normal = np.zeros((n_total, n_total))
-    rhs = np.zeros(n_total)
-    for rows, r, fixed, fixed_jtr, at, columns in dense:
+    return blocks, dense, theta, prior_sd, n_own_total
+
+
+def _dense_solve(dense, theta, prior_sd, n_own_total, left_out=None):
+    """The dense Gauss-Newton step of the mission, N = J'J + the fixed terms + the prior, all
+    placed in the mission's unknowns; float `left_out`'s rows and own unknowns dropped.
+    Returns its own unknowns' step (every float's, in order; zeros for the one left out),
+    the array's step and N^-1 on the array's columns."""
+    n_total = n_own_total + len(theta)
+    normal, rhs = np.zeros((n_total, n_total)), np.zeros(n_total)
+    kept = np.ones(n_total, dtype=bool)
+    for k, (rows, r, fixed, fixed_jtr, at, columns, n_own) in enumerate(dense):
+        if k == left_out:
+            kept[at : at + n_own] = False
+            continue
         normal += rows.T @ rows
         rhs -= rows.T @ r
         place = np.r_[at : at + fixed.shape[0] - len(columns), n_own_total + columns]
@@ -91,18 +103,42 @@ def test_block_arrow_solve_equals_a_dense_least_squares_solve():
     array = np.arange(n_own_total, n_total)
     normal[array, array] += prior_sd**-2.0
     rhs[array] -= prior_sd**-2.0 * theta
-    step = np.linalg.solve(normal, rhs)
-    np.testing.assert_allclose(solution.d_theta, step[array], rtol=1e-6, atol=1e-9 * np.abs(step[array]).max())
+    step = np.zeros(n_total)
+    step[kept] = np.linalg.solve(normal[np.ix_(kept, kept)], rhs[kept])
+    covariance = np.linalg.inv(normal[np.ix_(kept, kept)])[-len(theta) :, -len(theta) :]
+    return step[:n_own_total], step[array], covariance
+
+
+def test_block_arrow_solve_equals_a_dense_least_squares_solve(three_floats):
+    """Three floats' rows stacked into one dense Jacobian with the array's prior rows: the
+    least-squares step equals the Schur-complement solve's, for theta and every float."""
+    blocks, dense, theta, prior_sd, n_own_total = three_floats
+    solution = solve_mission(blocks, np.diag(prior_sd**-2.0), -(prior_sd**-2.0) * theta)
+    own_step, array_step, covariance = _dense_solve(dense, theta, prior_sd, n_own_total)
+    np.testing.assert_allclose(solution.d_theta, array_step, rtol=1e-6, atol=1e-9 * np.abs(array_step).max())
     own = np.concatenate(solution.d_own)
-    np.testing.assert_allclose(own, step[:n_own_total], rtol=1e-6, atol=1e-8 * np.abs(step[:n_own_total]).max())
-    np.testing.assert_allclose(
-        solution.covariance(), np.linalg.inv(normal)[np.ix_(array, array)], rtol=1e-6, atol=1e-14
-    )
+    np.testing.assert_allclose(own, own_step, rtol=1e-6, atol=1e-8 * np.abs(own_step).max())
+    np.testing.assert_allclose(solution.covariance(), covariance, rtol=1e-6, atol=1e-14)
+
+
+def test_each_float_left_out_equals_a_dense_solve_without_it(three_floats):
+    """The jackknife's steps: with float f's rows and unknowns dropped from the dense
+    system, its array step equals `left_out_steps()[f]`; the jackknife covariance is the
+    spread of those steps by its formula."""
+    blocks, dense, theta, prior_sd, n_own_total = three_floats
+    solution = solve_mission(blocks, np.diag(prior_sd**-2.0), -(prior_sd**-2.0) * theta)
+    steps = solution.left_out_steps()
+    for k in range(len(dense)):
+        _, array_step, _ = _dense_solve(dense, theta, prior_sd, n_own_total, left_out=k)
+        np.testing.assert_allclose(steps[k], array_step, rtol=1e-6, atol=1e-9 * np.abs(array_step).max())
+    assert not np.allclose(steps[0], steps[1])  # the floats differ: the spread is not nothing
+    centred = steps - steps.mean(axis=0)
+    np.testing.assert_allclose(solution.jackknife_covariance(), (2 / 3) * centred.T @ centred)
 
 
 @pytest.fixture(scope="module")
 def mission():
-    return _mission(6, 90)
+    return _mission(8, 90)
 
 
 def _faulted(beacons):
@@ -149,4 +185,33 @@ def test_a_mission_with_correct_tables_finds_nothing(mission):
     array = calibrated_array(_floats(beacons, simulated), beacons, CONFIG)
     assert {v.check.outcome for v in array.values} == {CONSISTENT}
     assert not array.released.any()
+    assert array.decided() == []
+
+
+def _with_path_biases(estimate, sd_s: float, rng: np.random.Generator):
+    """The estimate's arrivals each delayed by a bias of its (float, source) pair, N(0, sd_s):
+    an error the array fit's model lacks (each pair's own sound path, the same on every one
+    of its arrivals), so that a float's arrivals are not independent."""
+    labels = estimate.labels.copy()
+    sources = sorted(labels["beacon_id"].dropna().unique())
+    bias = dict(zip(sources, rng.normal(0.0, sd_s, len(sources)), strict=True))
+    labels["toa_s"] = labels["toa_s"] + labels["beacon_id"].map(bias).fillna(0.0)
+    return dataclasses.replace(estimate, labels=labels)
+
+
+def test_the_floats_spread_keeps_correlated_errors_from_being_named(mission):
+    """Correct tables, every float's arrivals biased per source (`_with_path_biases`, 5 s):
+    judged by the arrivals' noise alone, some correct value is contradicted; judged by the
+    floats' jackknife spread, none is."""
+    beacons, simulated = mission
+    rng = np.random.default_rng(11)
+    floats = []
+    for s in simulated:
+        built = mission_float(s.info.float_id, _with_path_biases(truth_estimate(s), 5.0, rng), beacons, s.info, CONFIG)
+        assert built is not None
+        floats.append(built)
+    array = calibrated_array(floats, beacons, CONFIG)
+    noise_only = array_values(array.fit, beacons, CONFIG.checks, widen=False)
+    assert any(v.check.outcome == CONTRADICTED for v in noise_only)
+    assert all(v.check.outcome != CONTRADICTED for v in array.values)
     assert array.decided() == []

@@ -7,6 +7,10 @@ shared sound speed, which every other source then seems to contradict a little).
 its prior is wide (`KalmanPriors.released_*`) and its estimate the arrivals'; the others are
 judged again without its pull. What is still contradicted after `MAX_RELEASES` is reported
 so, and not corrected.
+
+Each value is judged with its sd widened to the floats' spread where that is wider
+(`array_checks.widening`): the floats, not their arrivals, are the mission's independent
+units.
 """
 
 from __future__ import annotations

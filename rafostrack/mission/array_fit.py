@@ -96,13 +96,15 @@ class ArrayPriors:
 
 @dataclass(frozen=True)
 class ArrayFit:
-    """The array fitted on the mission: theta, its covariance, each float's own unknowns,
-    arrival weights and residuals, the floats (with their fitted TOA sds)."""
+    """The array fitted on the mission: theta, its covariance and the floats' jackknife
+    spread of it, each float's own unknowns, arrival weights and residuals, the floats
+    (with their fitted TOA sds)."""
 
     layout: ArrayLayout
     floats: list[MissionFloat]
     theta: NDArray[np.float64]
     covariance: NDArray[np.float64]
+    jackknife: NDArray[np.float64]  # the floats' spread (`ArraySolution.jackknife_covariance`)
     own: list[NDArray[np.float64]]  # per float, its own unknowns
     weight: list[NDArray[np.float64]]  # per float, its arrivals' direct-path weights
     toa_residual_s: list[NDArray[np.float64]]
@@ -216,4 +218,5 @@ def fit_array(
         cap = SIGMA_CAP * config.model.toa_sigma_s
         refits = [_refitted_noise(f, r, em, cap) for f, r, em in zip(floats, residuals, noise, strict=True)]
         floats, weight = [f for f, _ in refits], [w for _, w in refits]
-    return ArrayFit(layout, floats, theta, solution.covariance(), own, weight, residuals, array_priors, s0)
+    covariance, jackknife = solution.covariance(), solution.jackknife_covariance()
+    return ArrayFit(layout, floats, theta, covariance, jackknife, own, weight, residuals, array_priors, s0)

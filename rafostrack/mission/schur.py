@@ -19,6 +19,18 @@ eliminated on its own (its N_f is `BorderedBanded`: banded nodes, a dense border
 Each float's reduction costs O(n_f w m_f) for its n_f unknowns, band half-width w and the
 m_f array columns it touches; the array system O(M^3) once. S^-1 is the array's posterior
 covariance (of the linearised model).
+
+That covariance takes every arrival as independent; a float's arrivals are not (its track
+and clock errors last for weeks, its multipath may be its own), so the floats, not the
+arrivals, are the mission's independent units. The delete-one-float jackknife measures the
+spread that follows (`ArraySolution.jackknife_covariance`): float f left out, the array's
+Newton step from the same point is dth_(f) = (S - S_f)^-1 (r - r_f), with S_f, r_f the
+float's reduced terms, and
+
+    V_J = (F - 1) / F sum_f (dth_(f) - mean) (dth_(f) - mean)'
+
+(Efron and Stein; for a least-squares fit it is the cluster-robust covariance, the floats
+the clusters).
 """
 
 from __future__ import annotations
@@ -72,33 +84,71 @@ class FloatBlock:
 
 
 @dataclass(frozen=True)
+class ReducedTerms:
+    """A float's terms on theta with its own unknowns eliminated (`FloatBlock.reduced`)."""
+
+    schur: NDArray[np.float64]  # (m_f, m_f) E_f - C_f' N_f^-1 C_f
+    rhs: NDArray[np.float64]  # (m_f,) b_f,th - C_f' N_f^-1 b_f
+    columns: NDArray[np.intp]  # (m_f,) index in theta
+
+    def scattered(self, size: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The terms placed in theta's (size, size) system."""
+        schur, rhs = np.zeros((size, size)), np.zeros(size)
+        schur[np.ix_(self.columns, self.columns)] = self.schur
+        np.add.at(rhs, self.columns, self.rhs)
+        return schur, rhs
+
+
+@dataclass(frozen=True)
 class ArraySolution:
-    """The mission system's solution: the array's step, each float's, and S factored."""
+    """The mission system's solution: the array's step, each float's, S and r, S factored,
+    and each float's reduced terms."""
 
     d_theta: NDArray[np.float64]
     d_own: list[NDArray[np.float64]]
+    system: tuple[NDArray[np.float64], NDArray[np.float64]]  # S, r
     schur: tuple[NDArray[np.float64], bool]  # cho_factor of S
+    terms: list[ReducedTerms]
 
     def covariance(self) -> NDArray[np.float64]:
         """S^-1: the array's posterior covariance (of the linearised model)."""
         return cho_solve(self.schur, np.eye(len(self.d_theta)))
 
+    def left_out_steps(self) -> NDArray[np.float64]:
+        """(F, M) the array's step with each float left out, dth_(f) = (S - S_f)^-1 (r - r_f)."""
+        schur, rhs = self.system
+        steps = np.empty((len(self.terms), len(rhs)))
+        for k, terms in enumerate(self.terms):
+            schur_f, rhs_f = terms.scattered(len(rhs))
+            steps[k] = cho_solve(cho_factor(schur - schur_f, lower=True), rhs - rhs_f)
+        return steps
+
+    def jackknife_covariance(self) -> NDArray[np.float64]:
+        """V_J (module docstring): the spread of the array's estimate over the floats left out
+        in turn; zeros with fewer than two floats."""
+        steps = self.left_out_steps()
+        n = len(steps)
+        if n < 2:
+            return np.zeros((steps.shape[1], steps.shape[1]))
+        centred = steps - steps.mean(axis=0)
+        return (n - 1) / n * centred.T @ centred
+
 
 def array_system(
-    blocks: Sequence[FloatBlock], prior_information: NDArray, prior_rhs: NDArray
+    terms: Sequence[ReducedTerms], prior_information: NDArray, prior_rhs: NDArray
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """S and r (module docstring): the floats' reduced terms added into the array's prior."""
     schur, rhs = np.array(prior_information, dtype=float), np.array(prior_rhs, dtype=float)
-    for block in blocks:
-        reduced, reduced_rhs = block.reduced()
-        schur[np.ix_(block.columns, block.columns)] += reduced
-        np.add.at(rhs, block.columns, reduced_rhs)
+    for t in terms:
+        schur[np.ix_(t.columns, t.columns)] += t.schur
+        np.add.at(rhs, t.columns, t.rhs)
     return schur, rhs
 
 
 def solve_mission(blocks: Sequence[FloatBlock], prior_information: NDArray, prior_rhs: NDArray) -> ArraySolution:
     """The whole system's solution: theta's from S, then each float's by back-substitution."""
-    schur, rhs = array_system(blocks, prior_information, prior_rhs)
+    terms = [ReducedTerms(*b.reduced(), b.columns) for b in blocks]
+    schur, rhs = array_system(terms, prior_information, prior_rhs)
     factor = cho_factor(schur, lower=True)
     d_theta = cho_solve(factor, rhs)
-    return ArraySolution(d_theta, [b.back_substituted(d_theta) for b in blocks], factor)
+    return ArraySolution(d_theta, [b.back_substituted(d_theta) for b in blocks], (schur, rhs), factor, terms)
