@@ -20,7 +20,6 @@ from click.testing import CliRunner
 from support import simulated_mission_dir
 
 from rafostrack import batch as b
-from rafostrack.batch.corrections import SUPPORTED_NAME
 from rafostrack.batch.findings import (
     FINDINGS_COLUMNS,
     FINDINGS_NAME,
@@ -32,6 +31,7 @@ from rafostrack.batch.findings import (
     pooled_check,
 )
 from rafostrack.batch.report import report_findings
+from rafostrack.batch.run import LEGACY_SUPPORTED_NAME
 from rafostrack.batch.run_checks import parse_checks
 from rafostrack.calibrate.metadata_checks import MetadataCheck, SourceInformation
 from rafostrack.cli import main
@@ -505,7 +505,7 @@ def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive
     out = tmp_path / "out"
     result = _batch(archive, out)
     assert result.exit_code == 0, result.output
-    assert out / FINDINGS_NAME in atomic_writes and not (out / "dimes" / SUPPORTED_NAME).exists()
+    assert out / FINDINGS_NAME in atomic_writes
     assert (out / FINDINGS_NAME).read_text() == ",".join(FINDINGS_COLUMNS) + "\n"
     assert not list(out.glob(".*.tmp"))
     assert "metadata findings: no table value contradicted" in (out / "batch.log").read_text()
@@ -519,6 +519,8 @@ def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive
     manifest = json.loads((float_dir / b.MANIFEST).read_text())
     manifest["files"]["run.json"] = (float_dir / "run.json").stat().st_size
     (float_dir / b.MANIFEST).write_text(json.dumps(manifest))
+    stale = out / "dimes" / LEGACY_SUPPORTED_NAME  # an earlier version's table of the floats' findings
+    stale.write_text("id,offset_s\nB1,30.5\n")
 
     result = _batch(archive, out)
     assert result.exit_code == 0, result.output
@@ -530,9 +532,6 @@ def test_batch_writes_the_findings_atomically_and_reads_unchanged_floats(archive
     assert f"rafostrack batch: {line}" in result.stderr
     [row] = list(csv.DictReader((out / FINDINGS_NAME).open()))
     assert (row["mission"], row["id"], row["contradicting_floats"]) == ("dimes", "B1", "sim1")
-    # The one float that hears B1 decides it: the table with its offset replaced, the rest as given.
-    given = (archive / "dimes" / "beacons.csv").read_text().splitlines()
-    supported = (out / "dimes" / SUPPORTED_NAME).read_text().splitlines()
-    assert supported[0] == given[0] and supported[2:] == given[2:]
-    assert next(csv.DictReader(supported[:2]))["offset_s"] == "30.500"
-    assert f"{out / 'dimes' / SUPPORTED_NAME}: beacons.csv with the 1 value(s)" in (out / "batch.log").read_text()
+    # One float's finding is reported, never written into a table (the mission's array fit
+    # decides the table, and --no-array-fit asks for none); an earlier version's is removed.
+    assert not stale.exists() and not list((out / "dimes").glob("beacons-*.csv"))

@@ -14,8 +14,8 @@ One module per step, each stating in its docstring what it guarantees:
 - `findings`: the table values the arrivals contradict, per mission, a source's once for all
   the floats that hear it, and a source's offset, drift or position on their arrivals
   together (`metadata-findings.csv`).
-- `corrections`: the beacon table with the values the mission's floats decide replaced
-  (`OUT/<mission>/beacons-supported.csv`), for the user to review and track with.
+- `array_rounds`: each mission's array fitted on its floats (`rafostrack.mission`), the
+  floats tracked again with what it decides (`OUT/<mission>/beacons-calibrated.csv`).
 - `overview`: the mission overview, which floats need a look and why (`overview.html`,
   `overview.csv`, `overview.png`; also `rafostrack summary OUT`).
 - `run`: `run_batch`, the whole run in order.

@@ -7,9 +7,9 @@ Guarantees:
   anything is written in OUT.
 - Everything that writes in OUT happens while holding OUT's lock (`lock.py`): first the
   temporary directories and files a killed run left in OUT are removed, then the floats are
-  planned and run, then `batch-summary.csv`, `metadata-findings.csv`, each mission's
-  `beacons-supported.csv` (`corrections.py`), the mission overview (`overview.html`,
-  `overview.csv`, `overview.png`) are written atomically; `batch.log` is written as the run
+  planned and run, then each mission's array (`array_rounds.py`), `batch-summary.csv`,
+  `metadata-findings.csv`, the mission overview (`overview.html`, `overview.csv`,
+  `overview.png`) are written atomically; `batch.log` is written as the run
   goes, one whole line at a time (`report.Reporter.log_file`).
 - The result's exit code is 0 when no float failed, 1 when some did.
 """
@@ -33,7 +33,6 @@ from ..config import load_config
 from ..errors import InputError
 from ..io.outdir import SIBLING
 from .array_rounds import MAX_ROUNDS, calibrated_tables, fit_mission, replaced, round_line
-from .corrections import SUPPORTED_NAME, write_supported_tables
 from .discover import Mission, discover
 from .findings import findings_csv
 from .lock import BatchLock
@@ -51,6 +50,9 @@ from .report import (
 )
 
 _STALE_FILE = re.compile(r"^\..+\.tmp$")  # atomic_path's temporary files
+# The table earlier versions wrote from the floats' findings alone, removed from OUT: the
+# values it held were not the mission's (the array fit's `beacons-calibrated.csv` is).
+LEGACY_SUPPORTED_NAME = "beacons-supported.csv"
 
 
 def default_jobs() -> int:
@@ -261,9 +263,9 @@ def _plan_floats(
 def _write_reports(
     options: BatchOptions, missions: list[Mission], reporter: Reporter, outcomes: list[FloatOutcome], started: float
 ) -> str:
-    """The run's reports in OUT (the summary, the findings, the supported tables, the
-    overview, in this order; batch.log's last lines); returns the summary table to print (the run's
-    seconds counted from `started`, a `time.monotonic()`)."""
+    """The run's reports in OUT (the summary, the findings, the overview, in this order;
+    batch.log's last lines); returns the summary table to print (the run's seconds counted
+    from `started`, a `time.monotonic()`)."""
     from ..io.atomic import write_text_atomic
 
     out = options.out
@@ -272,11 +274,8 @@ def _write_reports(
     reporter.lines.extend(table.splitlines())
     write_text_atomic(out / SUMMARY_NAME, summary_csv(outcomes))
     write_text_atomic(out / FINDINGS_NAME, findings_csv(findings))
-    if options.array_fit:  # the mission's array fit decides the table (beacons-calibrated.csv)
-        for mission in missions:
-            (out / mission.name / SUPPORTED_NAME).unlink(missing_ok=True)
-    else:
-        write_supported_tables(findings, {m.name: m.path / "beacons.csv" for m in missions}, out, reporter.log)
+    for mission in missions:  # the array fit writes the mission's table (beacons-calibrated.csv)
+        (out / mission.name / LEGACY_SUPPORTED_NAME).unlink(missing_ok=True)
     report_overview(reporter, outcomes, out, findings, plots=options.plots)
     return table
 
