@@ -24,12 +24,13 @@ $(STAMP): $(RUNTIME)
 demo: $(RUNTIME)
 	$(BIN)/rafostrack track data/samples/float767.csv --out out
 
+# On every core, a test file's tests together in one worker (a file's fixtures are built once).
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadfile
 
 # The suite without the tests marked slow (each over ~5 s): a quick check while editing.
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest -n auto --dist loadfile -m "not slow"
 
 lint: $(STAMP)
 	$(BIN)/ruff check rafostrack papers tests benchmarks scripts

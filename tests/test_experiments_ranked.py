@@ -141,6 +141,7 @@ def test_bp_vs_exact(outdir):
         assert row["exact_ms"] > 0 and row["bp_ms"] > 0
 
 
+@pytest.mark.slow  # it reads the summaries of the experiments above, fig6b's among them
 def test_report_from_summaries(outdir):
     # runs after the experiments above (pytest keeps file order): rebuild from their JSON
     paper_main("ranked", ["--out", str(outdir), "--report-only"])
