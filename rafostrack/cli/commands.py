@@ -44,6 +44,11 @@ def main(debug: bool) -> None:
 @click.option("--no-smooth", is_flag=True, help="Filter only: no backward smoothing over the mission.")
 @click.option("--also-filtered", is_flag=True, help="Also write the filtered estimate (*_filtered.parquet).")
 @click.option(
+    "--threads",
+    type=click.IntRange(min=1),
+    help="Kernel threads (default: the cores idle when the run starts; the output is the same bits either way).",
+)
+@click.option(
     "--input-format",
     type=RegistryChoice(arrival_formats),
     help="The float file's format (default: by its name: *.csv, *.itm / rf*toa.mat, *_Rtraj_aux.nc).",
@@ -71,10 +76,12 @@ def track(
     method,
     output_format,
     input_format,
+    threads,
     **flags,
 ):
     """Label every TOA of FLOAT_FILE and estimate the float's track."""
     from ..io.output_formats import parse_formats
+    from ..model.parallel import kernel_threads, track_threads
     from ..run.one_float import track_float
 
     refuse_method(method)
@@ -86,15 +93,16 @@ def track(
 
     progress = progress_module.progress_for(sys.stderr, label=float_file.stem)
     try:
-        result = track_float(
-            inputs,
-            out_dir,
-            plots=not no_plots,
-            also_filtered=also_filtered,
-            progress=progress,
-            formats=formats,
-            notice=lambda message: click.echo(f"rafostrack: warning: {message}", err=True),
-        )
+        with kernel_threads(track_threads(threads)):
+            result = track_float(
+                inputs,
+                out_dir,
+                plots=not no_plots,
+                also_filtered=also_filtered,
+                progress=progress,
+                formats=formats,
+                notice=lambda message: click.echo(f"rafostrack: warning: {message}", err=True),
+            )
     finally:
         progress.close()
     for message in result.run["warnings"]:
