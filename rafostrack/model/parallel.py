@@ -87,4 +87,4 @@ def track_threads(asked: int | None) -> int:
     """The kernel threads of one float's run: as `asked` (`--threads`), else the idle cores
     (`idle_cores`); at most numba's (`NUMBA_NUM_THREADS`)."""
     wanted = asked if asked is not None else idle_cores(busy_cores(), usable_cores())
-    return max(1, min(wanted, numba.config.NUMBA_NUM_THREADS))
+    return max(1, min(wanted, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
