@@ -144,6 +144,8 @@ NEVER_SURFACED_SHARE = 0.1  # --faults: the share of floats that never surfaced,
 FALSE_ALARMS_PER_FLOAT = 0.01  # --faults: at most one false alarm per 100 floats
 FILTER_SEEDS = (0, 1, 2, 3)  # the [filter] seeds every float is tracked with, unless --filter-seeds
 SEED_RMSE_GAP = (2.0, 0.5)  # seeds' RMSEs differ: by more than max(km, share of the smallest)
+OFF_WINDOW_KM = 15.0  # a window of the worst seed this much farther off than the best seed's
+FLAGGED = ("ambiguous", "recovered")  # a window's status that says the track is not sure there
 
 
 @dataclasses.dataclass(frozen=True)
@@ -362,9 +364,31 @@ def seed_figures(table: pd.DataFrame) -> pd.DataFrame:
     return figures
 
 
+def off_windows(out_root: Path, table: pd.DataFrame) -> pd.DataFrame:
+    """Per float, the windows where its worst seed (largest RMSE) is more than
+    `OFF_WINDOW_KM` farther off than its best: how many (`off_windows`), and how many of
+    them that seed's track flags (`off_flagged`: status in `FLAGGED`), the test of the seed
+    target (a float whose seeds differ must say so where they do)."""
+    rows = {}
+    for name, runs in table.groupby("float"):
+        worst, best = (int(runs.loc[runs["rmse_km"].idxmax(), "filter_seed"]),
+                       int(runs.loc[runs["rmse_km"].idxmin(), "filter_seed"]))  # fmt: skip
+        err = {
+            k: pd.read_csv(out_root / f"seed{k}" / f"errors_{name}.csv")["error_km"].to_numpy() for k in (worst, best)
+        }
+        status = pd.read_parquet(
+            out_root / f"seed{worst}" / "default" / str(name) / "track.parquet", columns=["status"]
+        )
+        off = err[worst] - err[best] > OFF_WINDOW_KM
+        rows[name] = {"off_windows": int(off.sum()), "off_flagged": int(status["status"].isin(FLAGGED)[off].sum())}
+    return pd.DataFrame.from_dict(rows, orient="index")
+
+
 SPREAD_TEXT = (
     "spread_km: RMS distance of each seed's track from their mean; median_sd_km: the first seed's; "
-    f"rmse_unstable: RMSEs more than max({SEED_RMSE_GAP[0]:g} km, {SEED_RMSE_GAP[1]:.0%} of the smallest) apart"
+    f"rmse_unstable: RMSEs more than max({SEED_RMSE_GAP[0]:g} km, {SEED_RMSE_GAP[1]:.0%} of the smallest) apart; "
+    f"off_windows: the worst seed's windows more than {OFF_WINDOW_KM:g} km farther off than the best seed's, "
+    f"off_flagged: those of them its track flags ({', '.join(FLAGGED)})"
 )
 SPREAD_FORMATS: dict[str, Callable[[Any], str]] = {
     **{c: (lambda x: f"{x:.2f}") for c in ("spread_km", "median_sd_km", "rmse_min_km", "rmse_max_km")},
@@ -700,8 +724,9 @@ def _print_worst_seed(
     notes = [target_line(target) for target in worst]
     print(f"\ntargets under every filter seed ({', '.join(map(str, seeds))}; [seeds]: those a float fails under):")
     print("\n".join(notes))
-    spread = seed_spread(out_root, seeds, floats).join(seed_figures(table))
+    spread = seed_spread(out_root, seeds, floats).join(seed_figures(table)).join(off_windows(out_root, table))
     unstable = list(spread.index[spread["rmse_unstable"]])
+    unflagged = spread["off_windows"] - spread["off_flagged"]
     ratio = spread["spread_km"] / spread["median_sd_km"]
     print(f"\nper float over the seeds ({SPREAD_TEXT}):")
     print(spread.rename_axis("float").reset_index().to_string(index=False, formatters=SPREAD_FORMATS))
@@ -709,6 +734,8 @@ def _print_worst_seed(
         f"median spread {spread['spread_km'].median():.2f} km, {ratio.median():.0%} of the median sd_km "
         f"(largest: {ratio.idxmax()}, {ratio.max():.0%}); RMSE unstable between seeds: {len(unstable)}"
         + (f" ({', '.join(unstable)})" if unstable else "")
+        + f"; windows off in a float's worst seed: {int(spread['off_windows'].sum())}, flagged "
+        f"{int(spread['off_flagged'].sum())} (floats with some not flagged: {int((unflagged > 0).sum())})"
     )
     return _worst_seed_report(seeds, notes, spread)
 
