@@ -10,6 +10,7 @@ import pytest
 from scipy import sparse
 from support import truth_estimate
 
+from rafostrack.batch.pool import ordered_map
 from rafostrack.calibrate import kalman
 from rafostrack.calibrate.kalman_problem import NODE
 from rafostrack.calibrate.metadata_checks import CONSISTENT, CONTRADICTED
@@ -215,3 +216,18 @@ def test_the_floats_spread_keeps_correlated_errors_from_being_named(mission):
     assert any(v.check.outcome == CONTRADICTED for v in noise_only)
     assert all(v.check.outcome != CONTRADICTED for v in array.values)
     assert array.decided() == []
+
+
+@pytest.mark.slow
+def test_the_fit_over_worker_processes_gives_the_same_bits(mission):
+    """The fit's per-float work mapped over two worker processes (as `rafostrack batch` runs
+    it, `pool.ordered_map`) gives the same array, covariance, spread and values as here."""
+    beacons, simulated = mission
+    faulted = _faulted(beacons)
+    here = calibrated_array(_floats(faulted, simulated), faulted, CONFIG)
+    with ordered_map(2) as map_floats:
+        there = calibrated_array(_floats(faulted, simulated), faulted, CONFIG, map_floats)
+    for field in ("theta", "covariance", "jackknife"):
+        np.testing.assert_array_equal(getattr(there.fit, field), getattr(here.fit, field))
+    assert there.values == here.values
+    np.testing.assert_array_equal(there.released, here.released)

@@ -30,6 +30,7 @@ from ..io.atomic import write_text_atomic
 from ..io.writers import file_digest
 from .discover import Mission
 from .plan import FloatOutcome
+from .pool import OrderedMap
 
 MAX_ROUNDS = 3
 ARRAY_JSON = "array.json"
@@ -69,11 +70,13 @@ def fit_mission(
     overrides: dict[str, Any],
     plots: bool,
     round_: int,
+    map_floats: OrderedMap | None = None,
 ) -> ArrayRound | None:
     """The mission's array fitted on its floats' current outputs and written in
     OUT/<mission>; None when no float has outputs with enough confident arrivals. The
     calibrated table is rewritten only when the decisions moved (`settled_in`), and never in
-    the last round: the floats were tracked with the table there is."""
+    the last round: the floats were tracked with the table there is. `map_floats` maps the
+    fit's per-float work (`pool.ordered_map`; None: here)."""
     from ..io import read_beacons
     from ..mission.from_outputs import tracked_float
     from ..mission.outputs import CALIBRATED_NAME, write_array_outputs
@@ -91,7 +94,7 @@ def fit_mission(
             tracked.append(tracked_float(inputs, out_dir))
         except (InputError, OSError, KeyError, ValueError):
             continue  # its own outcome says why; the array rests on the others
-    fitted_mission = fit_mission_array(tracked)
+    fitted_mission = fit_mission_array(tracked, map_floats or map)
     if fitted_mission is None:
         return None
     array = fitted_mission.array

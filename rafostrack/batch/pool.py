@@ -31,7 +31,7 @@ import re
 import sys
 import tempfile
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
@@ -238,6 +238,51 @@ def run_local(
         text = stderr.text_since(stderr_start)
         if text and on_stderr is not None:
             on_stderr(text)
+
+
+OrderedMap = Callable[[Callable[[Any], Any], Iterable[Any]], list[Any]]
+
+
+@contextlib.contextmanager
+def ordered_map(jobs: int, client: Any = None) -> Iterator[OrderedMap]:
+    """A map whose results come back in order, over `jobs` local worker processes (started
+    as `run_local`'s are) or the Dask cluster of `client`, for work beside the floats'
+    tracking (the mission's array fit, `mission.array_fit.float_step`); the builtin map for
+    one job. Where the pool breaks (a worker killed, out of memory) or Dask fails, the map
+    computes here instead: the same results, more slowly."""
+    if client is not None:
+        yield _falling_back(lambda fn, items: client.gather(client.map(fn, items, pure=False)))
+        return
+    if jobs <= 1:
+        yield lambda fn, items: list(map(fn, items))
+        return
+    ctx = _mp_context()
+    lifeline, keep_alive = ctx.Pipe(duplex=False)
+    try:
+        with ProcessPoolExecutor(
+            max_workers=jobs, mp_context=ctx, initializer=_worker_init, initargs=(lifeline, PACKAGE_DIR)
+        ) as pool:
+            with _starting_workers(ctx):  # every worker starts here, with what it inherits
+                started = [pool.submit(os.getpid) for _ in range(jobs)]
+            for future in started:
+                future.result()
+            yield _falling_back(lambda fn, items: list(pool.map(fn, items)))
+    finally:
+        keep_alive.close()
+        lifeline.close()
+
+
+def _falling_back(mapped: OrderedMap) -> OrderedMap:
+    """`mapped`, or the builtin map where it fails for want of its workers."""
+
+    def map_or_here(fn: Callable[[Any], Any], items: Iterable[Any]) -> list[Any]:
+        items = list(items)
+        try:
+            return mapped(fn, items)
+        except (BrokenProcessPool, OSError, TimeoutError):
+            return list(map(fn, items))
+
+    return map_or_here
 
 
 def dask_client(address: str) -> Any:

@@ -37,7 +37,7 @@ from .discover import Mission, discover
 from .findings import findings_csv
 from .lock import BatchLock
 from .plan import FAILED, SKIPPED, FloatOutcome, FloatTask, plan
-from .pool import dask_client, local_workers, run_dask, run_local
+from .pool import dask_client, local_workers, ordered_map, run_dask, run_local
 from .report import (
     FINDINGS_NAME,
     LOG_NAME,
@@ -191,14 +191,17 @@ def _array_rounds(
     (`array_rounds`); the outcomes with each retracked float's latest."""
     for round_ in range(1, MAX_ROUNDS + 1):
         fitted, tables = [], {}
-        for mission in missions:
-            result = fit_mission(mission, options.out, options.config_files, options.overrides, options.plots, round_)
-            if result is None:
-                continue
-            reporter.log(round_line(result, round_))
-            fitted.append(mission)
-            if result.calibrated is not None:
-                tables[mission.name] = result.calibrated
+        with ordered_map(options.jobs, client) as map_floats:
+            for mission in missions:
+                result = fit_mission(
+                    mission, options.out, options.config_files, options.overrides, options.plots, round_, map_floats
+                )
+                if result is None:
+                    continue
+                reporter.log(round_line(result, round_))
+                fitted.append(mission)
+                if result.calibrated is not None:
+                    tables[mission.name] = result.calibrated
         if round_ == MAX_ROUNDS or not fitted:
             break
         tasks, _ = _planned(options, fitted, lock, tables, force=False)

@@ -28,7 +28,7 @@ from ..config import Config
 from ..domain import BeaconTable
 from ..model.geodesy import local_offsets_km
 from .array_checks import RELEASES, ArrayValue, array_values, strongest_contradiction
-from .array_fit import SOURCE_BLOCKS, ArrayFit, fit_array
+from .array_fit import SOURCE_BLOCKS, ArrayFit, FloatMap, fit_array
 from .floats import MissionFloat
 
 MAX_RELEASES = 12
@@ -132,11 +132,13 @@ def array_priors(config: Config) -> kalman.KalmanPriors:
     return kalman.DEFAULT_PRIORS
 
 
-def calibrated_array(floats: Sequence[MissionFloat], beacons: BeaconTable, config: Config) -> MissionArray:
+def calibrated_array(
+    floats: Sequence[MissionFloat], beacons: BeaconTable, config: Config, map_floats: FloatMap = map
+) -> MissionArray:
     """Fit the array on `floats`, judge its values and release the contradicted ones one at
-    a time, strongest first (module docstring)."""
+    a time, strongest first (module docstring); `map_floats` maps the fit's per-float work."""
     priors = array_priors(config)
-    fit = fit_array(floats, config, priors=priors)
+    fit = fit_array(floats, config, priors=priors, map_floats=map_floats)
     released = np.zeros((len(fit.layout.sources), len(SOURCE_BLOCKS)), dtype=bool)
     values = array_values(fit, beacons, config.checks)
     for _ in range(MAX_RELEASES):
@@ -144,7 +146,9 @@ def calibrated_array(floats: Sequence[MissionFloat], beacons: BeaconTable, confi
         if worst is None:
             break
         released[worst.source, list(RELEASES[worst.check.field])] = True
-        fit = fit_array(fit.floats, config, released, start=fit, priors=priors, iterations=RELEASE_ITERATIONS)
+        fit = fit_array(
+            fit.floats, config, released, start=fit, priors=priors, iterations=RELEASE_ITERATIONS, map_floats=map_floats
+        )
         values = array_values(fit, beacons, config.checks)
     array = MissionArray(fit, values, released, beacons)
     if array.trusted(config.model.toa_sigma_s):

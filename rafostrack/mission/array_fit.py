@@ -14,12 +14,17 @@ so that its estimate is the arrivals'.
 
 Layout of theta: the shared slowness deviation, then per source (`ArrayLayout.sources`,
 beacon-table rows) its five unknowns in `SOURCE_BLOCKS` order.
+
+Each step's per-float work (a float's linearisation, its block of the normal equations and
+its arrivals' weights refitted) is independent of every other float's: `float_step` over a
+`FloatTask`, mapped by `map_floats` (in order; `rafostrack batch` maps it over its worker
+processes, with the same results as the builtin `map`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,15 +125,47 @@ class ArrayFit:
         return np.concatenate([self.own[k], self.theta[self.layout.float_columns(self.floats[k])]])
 
 
-def _float_step(
-    f: MissionFloat, u: NDArray, weight: NDArray, priors: kalman.KalmanPriors, columns: NDArray
-) -> tuple[FloatBlock, NDArray]:
-    """A float's block of the normal equations at its unknowns u (own, then the array's
-    columns), and its arrivals' residuals there."""
-    lin = kalman.linearise(f.problem, u, weight, priors, array_priors=False)
+@dataclass(frozen=True)
+class FloatTask:
+    """One float's work in a Gauss-Newton step: its unknowns u (own, then the array's
+    columns), its arrivals' weights, and, unless this is the last step, how to refit them."""
+
+    float_: MissionFloat
+    unknowns: NDArray[np.float64]
+    weight: NDArray[np.float64]
+    columns: NDArray[np.intp]
+    priors: kalman.KalmanPriors
+    noise: MultipathEM
+    sigma_cap_s: float
+    refit: bool
+
+
+@dataclass(frozen=True)
+class FloatStep:
+    """What a float's task gives: its block of the normal equations, its arrivals' residuals,
+    and, refitted from those residuals, the float (its TOA sd), its weights and its noise."""
+
+    block: FloatBlock
+    residual_s: NDArray[np.float64]
+    float_: MissionFloat
+    weight: NDArray[np.float64]
+    noise: MultipathEM
+
+
+FloatMap = Callable[[Callable[[FloatTask], FloatStep], Iterable[FloatTask]], Iterable[FloatStep]]
+
+
+def float_step(task: FloatTask) -> FloatStep:
+    """A float's block of the normal equations at its unknowns, its arrivals' residuals
+    there, and (`task.refit`) its weights and TOA sd refitted to them (`_refitted_noise`)."""
+    f = task.float_
+    lin = kalman.linearise(f.problem, task.unknowns, task.weight, task.priors, array_priors=False)
     normal = lin.normal(f.hyper)
-    block = FloatBlock.of(normal.jtj, -normal.jtr, NODE * f.problem.n_nodes, BANDWIDTH, f.n_own, columns)
-    return block, lin.toa_residual_s
+    block = FloatBlock.of(normal.jtj, -normal.jtr, NODE * f.problem.n_nodes, BANDWIDTH, f.n_own, task.columns)
+    if not task.refit:
+        return FloatStep(block, lin.toa_residual_s, f, task.weight, task.noise)
+    refitted, weight = _refitted_noise(f, lin.toa_residual_s, task.noise, task.sigma_cap_s)
+    return FloatStep(block, lin.toa_residual_s, refitted, weight, task.noise)
 
 
 def _step_scale(d_theta: NDArray, layout: ArrayLayout) -> float:
@@ -184,13 +221,15 @@ def fit_array(
     start: ArrayFit | None = None,
     priors: kalman.KalmanPriors = kalman.DEFAULT_PRIORS,
     iterations: int = ITERATIONS,
+    map_floats: FloatMap = map,
 ) -> ArrayFit:
     """Gauss-Newton over the mission (module docstring), from `start` (a previous fit of
     the same floats) or the tables as given: each step reduces every float to the array
     block, solves it and back-substitutes (the step shortened where a source would move
-    beyond `STEP_LIMITS`), then refits the arrivals' weights and each float's TOA sd from
-    the residuals the step started from (iteratively reweighted, one step behind).
-    `released` (G, 5): the source unknowns under wide priors."""
+    beyond `STEP_LIMITS`), then takes the arrivals' weights and each float's TOA sd refitted
+    from the residuals the step started from (iteratively reweighted, one step behind).
+    `released` (G, 5): the source unknowns under wide priors; `map_floats`: how the floats'
+    tasks are mapped (in order)."""
     if start is None:
         layout = ArrayLayout.of(floats)
         floats = referred(list(floats), layout.sources, layout.mid_days)
@@ -203,20 +242,21 @@ def fit_array(
     information = np.diag(1.0 / array_priors.sd() ** 2)
     columns = [layout.float_columns(f) for f in floats]
     noise = [MultipathEM(config.model) for _ in floats]
+    cap = SIGMA_CAP * config.model.toa_sigma_s
     for step in range(iterations + 1):
-        steps = [
-            _float_step(f, np.concatenate([x, theta[c]]), w, priors, c)
-            for f, c, x, w in zip(floats, columns, own, weight, strict=True)
+        last = step == iterations  # the covariance at the solution, no further move
+        tasks = [
+            FloatTask(f, np.concatenate([x, theta[c]]), w, c, priors, em, cap, refit=not last)
+            for f, c, x, w, em in zip(floats, columns, own, weight, noise, strict=True)
         ]
-        blocks, residuals = [b for b, _ in steps], [r for _, r in steps]
-        solution = solve_mission(blocks, information, -information @ theta)
-        if step == iterations:  # the covariance at the solution, no further move
+        steps = list(map_floats(float_step, tasks))
+        residuals = [s.residual_s for s in steps]
+        solution = solve_mission([s.block for s in steps], information, -information @ theta)
+        if last:
             break
         scale = _step_scale(solution.d_theta, layout)
         theta = theta + scale * solution.d_theta
         own = [x + scale * dx for x, dx in zip(own, solution.d_own, strict=True)]
-        cap = SIGMA_CAP * config.model.toa_sigma_s
-        refits = [_refitted_noise(f, r, em, cap) for f, r, em in zip(floats, residuals, noise, strict=True)]
-        floats, weight = [f for f, _ in refits], [w for _, w in refits]
+        floats, weight, noise = [s.float_ for s in steps], [s.weight for s in steps], [s.noise for s in steps]
     covariance, jackknife = solution.covariance(), solution.jackknife_covariance()
     return ArrayFit(layout, floats, theta, covariance, jackknife, own, weight, residuals, array_priors, s0)

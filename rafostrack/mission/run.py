@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .array import MissionArray, calibrated_array
+from .array_fit import FloatMap
 from .floats import mission_float
 from .from_outputs import TrackedFloat
 from .source_scan import Pile, relabelled, scan_sources
@@ -21,9 +22,10 @@ class MissionFit:
     piles: list[Pile]
 
 
-def fit_mission_array(tracked: Sequence[TrackedFloat]) -> MissionFit | None:
+def fit_mission_array(tracked: Sequence[TrackedFloat], map_floats: FloatMap = map) -> MissionFit | None:
     """Scan, relabel, fit and judge (module docstring); None when no float has enough
-    confident arrivals. The mission's configuration and tables are its first float's."""
+    confident arrivals. The mission's configuration and tables are its first float's;
+    `map_floats` maps the fit's per-float work (`array_fit.float_step`)."""
     if not tracked:
         return None
     piles = scan_sources([(t.estimate, t.problem) for t in tracked])
@@ -37,4 +39,4 @@ def fit_mission_array(tracked: Sequence[TrackedFloat]) -> MissionFit | None:
     if not floats:
         return None
     first = tracked[0].problem
-    return MissionFit(calibrated_array(floats, first.beacons, first.config), piles)
+    return MissionFit(calibrated_array(floats, first.beacons, first.config, map_floats), piles)
