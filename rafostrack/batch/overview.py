@@ -12,6 +12,7 @@ One module per concept:
   run.json; the warnings counted by the kind each was made with, run.json's
   `warning_kinds`), and the text of overview.csv;
 - `triage.py`: when a float needs a look (`LookRules`) and the order shown (`judged`);
+- `overview_array.py`: each mission's array fit (array.csv, array.json), its section of the page;
 - `overview_page.py`: overview.html;
 - here: the overview of a batch's floats or of an existing tree, and its three files.
 
@@ -32,6 +33,7 @@ from ..io import atomic
 from ..io.csv_mission import read_beacons
 from ..plots.mission_map import OK, FloatPath, plot_mission_map
 from .findings import Finding, batch_findings, is_current
+from .overview_array import mission_arrays
 from .overview_page import OVERVIEW_HTML, map_title, overview_html
 from .overview_rows import OVERVIEW_COLUMNS, OVERVIEW_CSV, FloatRow, overview_csv, summarise_float
 from .plan import FAILED, PROCESSED, FloatOutcome
@@ -63,8 +65,9 @@ def build_overview(
     findings: Sequence[Finding] | None = None,
 ) -> Overview:
     """The overview of a batch's floats: the current outputs of each float processed or
-    skipped as unchanged, each failed float with its reason; the others counted. `findings`:
-    the floats' metadata findings, when the batch has them already (else read here)."""
+    skipped as unchanged, each failed float with its reason; the others counted; each
+    mission's array fit (OUT/<mission>/array.csv, when there is one). `findings`: the
+    floats' metadata findings, when the batch has them already (else read here)."""
     rows = []
     not_tracked = 0
     for outcome in outcomes:
@@ -77,7 +80,8 @@ def build_overview(
     rules = rules or LookRules()
     found = batch_findings(outcomes)[0] if findings is None else findings
     messages = tuple(f.message().removeprefix("mission : ") for f in found)
-    return Overview(Path(out), judged(rows, rules), not_tracked, rules, messages)
+    arrays = mission_arrays(Path(out), (r.mission for r in rows))
+    return Overview(Path(out), judged(rows, rules), not_tracked, rules, messages, arrays)
 
 
 # ------------------------------------------------------------------- an existing output tree

@@ -1,4 +1,5 @@
-"""The mission overview's page, overview.html: counts, the map inline, the sortable table, the rules.
+"""The mission overview's page, overview.html: counts, the map inline, the sortable table, each
+mission's array fit (`overview_array.py`), the rules.
 
 One self-contained file (no network): the map's PNG inline as base64, the table sorted by a
 click on a column's header (a few lines of script), every value escaped. Floats that need a
@@ -16,6 +17,7 @@ from urllib.parse import quote
 
 from .. import __version__
 from ..plots.mission_map import NEEDS_LOOK, OK
+from .overview_array import arrays_count_text, arrays_html
 from .overview_rows import OVERVIEW_CSV, STATUSES, FloatRow, kinds_text
 from .plan import FAILED
 from .triage import LOOK_ORDER, Overview
@@ -50,6 +52,11 @@ table.overview td.num { text-align: right; white-space: nowrap; }
 tr.failed td { background: #f8d7d7; }
 tr.needs td { background: #fdeeee; }
 td .configured { color: #888; }
+table.array { border-collapse: collapse; font-size: 12px; }
+table.array th, table.array td { border: 1px solid #ddd; padding: 3px 5px; vertical-align: top; }
+table.array th { background: #f0f0f0; }
+table.array td.num { text-align: right; white-space: nowrap; }
+tr.contradicted td { background: #fdeeee; }
 """
 
 # Click a header: sort the rows by that column (numbers by value, text alphabetically, empty
@@ -156,17 +163,18 @@ def _warnings_text(row: FloatRow) -> str:
 
 
 def _counts_text(overview: Overview) -> str:
-    """'3 floats: 1 needs a look (of which 1 failed), 2 ok; 1 not tracked (no arrival file).'"""
+    """'3 floats: 1 needs a look (of which 1 failed), 2 ok; 1 not tracked (no arrival file).'
+    and, with an array fit, ' Array fit: 2 table values decided.'"""
     n, failed, needs, ok = len(overview.rows), overview.count(FAILED), overview.count(NEEDS_LOOK), overview.count(OK)
     text = f"{n} float{'s' if n != 1 else ''}: {needs + failed} need{'s' if needs + failed == 1 else ''} a look"
     text += f" (of which {failed} failed), {ok} ok" if failed else f", {ok} ok"
     if overview.not_tracked:
         text += f"; {overview.not_tracked} not tracked (no arrival file yet)"
-    return text + "."
+    return " ".join(filter(None, (text + ".", arrays_count_text(overview.arrays))))
 
 
 def overview_html(overview: Overview, png: bytes | None) -> str:
-    """The page: counts, the map (the PNG inline), the sortable table, the rules."""
+    """The page: counts, the map (the PNG inline), the sortable table, the array fits, the rules."""
     title = f"Mission overview: {overview.out}"
     image = (
         f'<p><img class="map" alt="{_esc(map_title(overview))}" '
@@ -203,6 +211,7 @@ values are as configured, not calibrated. The same table is in {_esc(OVERVIEW_CS
 </tbody>
 </table>
 </div>
+{arrays_html(overview.arrays)}
 <h2>A float needs a look when</h2>
 <ul>{rules}</ul>
 <p>Shares of windows by track status (ok, ambiguous, recovered, unsupported); sd: the

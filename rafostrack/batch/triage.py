@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ..errors import WarningKind
 from ..plots.mission_map import NEEDS_LOOK, OK
+from .overview_array import ArraySection
 from .overview_rows import FloatRow
 from .plan import FAILED
 
@@ -86,6 +87,7 @@ class Overview:
     not_tracked: int = 0  # listed in floats.csv but with no arrival file (or skipped otherwise)
     rules: LookRules = LookRules()
     findings: tuple[str, ...] = ()  # the mission's metadata findings, one line each (`findings.py`)
+    arrays: tuple[ArraySection, ...] = ()  # each mission's array fit, when it has one (`overview_array.py`)
 
     def count(self, look: str) -> int:
         return sum(r.look == look for r in self.rows)
