@@ -19,7 +19,10 @@ source and field; its estimate within 2 sd of the truth) and the false findings 
 contradicted that were right).
 
     python benchmarks/mission_array.py [--floats 24] [--days 240] [--seed 2026 ...]
-                                       [--faults KIND,...] [--jobs 2] [--out DIR]
+                                       [--faults "KIND,... each"] [--jobs 2] [--out DIR]
+
+`--faults each` runs every source fault kind alone (a mission each, the same floats),
+besides or instead of the set of several at once.
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ import pandas as pd
 from rafostrack.batch import run_batch
 from rafostrack.model.geodesy import local_offsets_km
 from rafostrack.sim.evaluate import confidently_wrong, position_errors_km
-from rafostrack.sim.faults import InjectedFault, read_faults
+from rafostrack.sim.faults import SOURCE_KINDS, InjectedFault, read_faults
 from rafostrack.sim.stress import simulate_stress, with_faults, write_stress_mission
 from rafostrack.sim.stress_config import StressConfig
 from rafostrack.sim.stress_float import substream
@@ -49,16 +52,30 @@ FAULT_STREAM = 77
 REFERENCE = "correct alone"
 
 
+def fault_sets(text: str) -> dict[str, tuple[str, ...]]:
+    """The fault sets of `--faults`: `KIND,KIND,...` (one set, several at once), `each` (every
+    source kind alone), or both, separated by spaces; a kind alone named by itself, a set of
+    several `several` (then `several2`, ...)."""
+    sets: dict[str, tuple[str, ...]] = {}
+    for word in text.split():
+        for kinds in [(k,) for k in SOURCE_KINDS] if word == "each" else [tuple(word.split(","))]:
+            several = sum(len(k) > 1 for k in sets.values())
+            sets[kinds[0] if len(kinds) == 1 else f"several{several + 1 if several else ''}"] = kinds
+    return sets
+
+
 def make_missions(
-    root: Path, n: int, days: int, seed: int, faults: tuple[str, ...], share: float, geometry: str
+    root: Path, n: int, days: int, seed: int, sets: dict[str, tuple[str, ...]], share: float, geometry: str
 ) -> None:
-    """`root/correct` and `root/faulted`: the same floats, the tables correct and faulted."""
+    """`root/correct` and `root/faulted-<set>` per fault set: the same floats, the tables
+    correct and with each set's faults (drawn from the same stream whatever the sets)."""
     cfg = StressConfig(days=days, clutter_rate=1.5, clock_end_offset_s=(-40.0, 40.0))
     rng = np.random.default_rng([seed, 53])
     mission = simulate_stress(geometry, n, rng, cfg, prefix="f")
     write_stress_mission(mission, root / "correct" / "m")
-    wrong = dataclasses.replace(cfg, faults=faults, fault_float_share=share)
-    write_stress_mission(with_faults(mission, wrong, substream(rng, FAULT_STREAM)), root / "faulted" / "m")
+    for name, kinds in sets.items():
+        wrong = dataclasses.replace(cfg, faults=kinds, fault_float_share=share)
+        write_stress_mission(with_faults(mission, wrong, substream(rng, FAULT_STREAM)), root / f"faulted-{name}" / "m")
 
 
 def scores(out: Path, mission: Path) -> pd.DataFrame:
@@ -114,12 +131,21 @@ def array_verdict(out: Path, mission: Path) -> dict[str, object]:
     }
 
 
+def runs(sets: dict[str, tuple[str, ...]]) -> list[tuple[str, str, dict[str, bool]]]:
+    """(name, mission folder, run_batch flags) of each run: the correct tables alone (the
+    reference) and with the array fit, then each fault set's alone and with it."""
+    found = [(REFERENCE, "correct", {"array_fit": False}), ("correct + array", "correct", {})]
+    for name in sets:
+        folder = f"faulted-{name}"
+        found += [(f"{name} alone", folder, {"array_fit": False}), (f"{name} + array", folder, {})]
+    return found
+
+
 def run(root: Path, seed: int, args: argparse.Namespace) -> None:
-    make_missions(root, args.floats, args.days, seed, tuple(args.faults.split(",")), args.clock_share, args.geometry)
+    sets = fault_sets(args.faults)
+    make_missions(root, args.floats, args.days, seed, sets, args.clock_share, args.geometry)
     tables = {}
-    for name, mission, flags in ((REFERENCE, "correct", {"array_fit": False}), ("correct + array", "correct", {}),
-                                 ("faulted alone", "faulted", {"array_fit": False}),
-                                 ("faulted + array", "faulted", {})):  # fmt: skip
+    for name, mission, flags in runs(sets):
         out = root / "out" / name.replace(" ", "_").replace("+", "and")
         started = time.perf_counter()
         run_batch([root / mission], out, jobs=args.jobs, plots=False, stream=open("/dev/null", "w"), **flags)
@@ -144,7 +170,11 @@ def main() -> None:
     parser.add_argument("--floats", type=int, default=24)
     parser.add_argument("--days", type=int, default=240)
     parser.add_argument("--seed", type=int, nargs="+", default=[2026])
-    parser.add_argument("--faults", default=FAULTS)
+    parser.add_argument(
+        "--faults",
+        default=FAULTS,
+        help="fault sets, space-separated: KIND,KIND,... (several at once) or each (every source kind alone)",
+    )
     parser.add_argument("--clock-share", type=float, default=0.1, help="share of floats whose end clock is left out")
     parser.add_argument("--geometry", default="dimes")
     parser.add_argument("--jobs", type=int, default=2)
