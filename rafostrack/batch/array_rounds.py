@@ -76,24 +76,20 @@ def fit_mission(
     OUT/<mission>; None when no float has outputs with enough confident arrivals. The
     calibrated table is rewritten only when the decisions moved (`settled_in`), and never in
     the last round: the floats were tracked with the table there is. `map_floats` maps the
-    fit's per-float work (`pool.ordered_map`; None: here)."""
+    reading of each float's outputs and the fit's per-float work (`pool.ordered_map`; None:
+    here)."""
     from ..io import read_beacons
-    from ..mission.from_outputs import tracked_float
     from ..mission.outputs import CALIBRATED_NAME, write_array_outputs
     from ..mission.run import fit_mission_array
     from ..run.one_float import TrackInputs
 
-    tracked = []
-    for float_id in sorted(mission.rows):
-        out_dir = out / mission.name / float_id
-        if not (out_dir / "run.json").is_file():
-            continue
-        float_path = mission.path / f"{float_id}.csv"
-        inputs = TrackInputs(float_path=float_path, config_files=config_files, overrides=overrides)
-        try:
-            tracked.append(tracked_float(inputs, out_dir))
-        except (InputError, OSError, KeyError, ValueError):
-            continue  # its own outcome says why; the array rests on the others
+    tasks = [
+        (TrackInputs(float_path=mission.path / f"{float_id}.csv", config_files=config_files, overrides=overrides),
+         out / mission.name / float_id)
+        for float_id in sorted(mission.rows)
+        if (out / mission.name / float_id / "run.json").is_file()
+    ]  # fmt: skip
+    tracked = [t for t in (map_floats or map)(_tracked_or_none, tasks) if t is not None]
     fitted_mission = fit_mission_array(tracked, map_floats or map)
     if fitted_mission is None:
         return None
@@ -120,6 +116,18 @@ def fit_mission(
     )
     _record(fitted, mission, out, round_)
     return fitted
+
+
+def _tracked_or_none(task: tuple[Any, Path]) -> Any:
+    """A float's inputs and outputs read back for the fit (`from_outputs.tracked_float`), or
+    None where they cannot be: its own outcome says why, and the array rests on the others."""
+    from ..mission.from_outputs import tracked_float
+
+    inputs, out_dir = task
+    try:
+        return tracked_float(inputs, out_dir)
+    except (InputError, OSError, KeyError, ValueError):
+        return None
 
 
 def _record(fitted: ArrayRound, mission: Mission, out: Path, round_: int) -> None:
