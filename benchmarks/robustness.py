@@ -145,7 +145,7 @@ FALSE_ALARMS_PER_FLOAT = 0.01  # --faults: at most one false alarm per 100 float
 FILTER_SEEDS = (0, 1, 2, 3)  # the [filter] seeds every float is tracked with, unless --filter-seeds
 SEED_RMSE_GAP = (2.0, 0.5)  # seeds' RMSEs differ: by more than max(km, share of the smallest)
 OFF_WINDOW_KM = 15.0  # a window of the worst seed this much farther off than the best seed's
-FLAGGED = ("ambiguous", "recovered")  # a window's status that says the track is not sure there
+FLAGGED = ("ambiguous", "recovered", "unsupported")  # statuses saying the track is not sure there
 
 
 @dataclasses.dataclass(frozen=True)
