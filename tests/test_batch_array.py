@@ -74,9 +74,16 @@ def test_the_mission_decides_the_wrong_offsets_tracks_with_them_and_a_rerun_trac
 def test_without_the_array_fit_each_float_checks_alone(faulted, tmp_path):
     root, _ = faulted
     out = tmp_path / "out"
+    (out / "m").mkdir(parents=True)
+    for name in ("array.csv", "array.json", "beacons-calibrated.csv"):  # an earlier run's fit
+        (out / "m" / name).write_text("earlier\n")
     result = _batch(root, out, "--no-array-fit")
     assert result.exit_code == 0, result.output
-    assert not (out / "m" / "array.csv").exists() and not (out / "m" / "beacons-calibrated.csv").exists()
+    assert not list((out / "m").glob("array*")) and not (out / "m" / "beacons-calibrated.csv").exists()
+    assert (
+        "an earlier run's array fit removed (array.csv, array.json, beacons-calibrated.csv)"
+        in (out / "batch.log").read_text()
+    )
     for float_dir in sorted((out / "m").glob("sim*")):
         run = json.loads((float_dir / "run.json").read_text())
         assert Path(run["inputs"]["beacons"]["path"]).name == "beacons.csv"

@@ -279,8 +279,26 @@ def _write_reports(
     write_text_atomic(out / FINDINGS_NAME, findings_csv(findings))
     for mission in missions:  # the array fit writes the mission's table (beacons-calibrated.csv)
         (out / mission.name / LEGACY_SUPPORTED_NAME).unlink(missing_ok=True)
+        if not options.array_fit:
+            _remove_array_outputs(out / mission.name, reporter)
     report_overview(reporter, outcomes, out, findings, plots=options.plots)
     return table
+
+
+def _remove_array_outputs(folder: Path, reporter: Reporter) -> None:
+    """An earlier run's array fit of the mission, removed from `folder` (with a log line):
+    under --no-array-fit its floats are tracked with the tables as given, and the overview
+    would show a fit their tracks no longer rest on."""
+    from ..mission.outputs import ARRAY_NAME, ARRAY_PLOT_NAME, CALIBRATED_NAME
+    from .array_rounds import ARRAY_JSON
+
+    found = [folder / name for name in (ARRAY_NAME, ARRAY_JSON, ARRAY_PLOT_NAME, CALIBRATED_NAME)]
+    found = [path for path in found if path.is_file()]
+    for path in found:
+        path.unlink()
+    if found:
+        names = ", ".join(path.name for path in found)
+        reporter.log(f"{folder}: an earlier run's array fit removed ({names}): --no-array-fit uses the tables as given")
 
 
 def _log_worker_stderr(reporter: Reporter, text: str, out: Path) -> None:
