@@ -264,8 +264,12 @@ def ordered_map(jobs: int, client: Any = None) -> Iterator[OrderedMap]:
         ) as pool:
             with _starting_workers(ctx):  # every worker starts here, with what it inherits
                 started = [pool.submit(os.getpid) for _ in range(jobs)]
-            for future in started:
-                future.result()
+            try:
+                for future in started:
+                    future.result()
+            except BrokenProcessPool:  # the workers cannot start (the floats' outcomes say why)
+                yield lambda fn, items: list(map(fn, items))
+                return
             yield _falling_back(lambda fn, items: list(pool.map(fn, items)))
     finally:
         keep_alive.close()
