@@ -89,8 +89,9 @@ def fit_mission(
         for float_id in sorted(mission.rows)
         if (out / mission.name / float_id / "run.json").is_file()
     ]  # fmt: skip
-    tracked = [t for t in (map_floats or map)(_tracked_or_none, tasks) if t is not None]
-    fitted_mission = fit_mission_array(tracked, map_floats or map)
+    mapped = map_floats or map
+    tracked = [t for t in mapped(_tracked_or_none, tasks) if t is not None]
+    fitted_mission = fit_mission_array(tracked, mapped)
     if fitted_mission is None:
         return None
     array = fitted_mission.array

@@ -182,6 +182,21 @@ def _mp_context() -> multiprocessing.context.BaseContext:
     return multiprocessing.get_context()
 
 
+@contextlib.contextmanager
+def _worker_pool(ctx: multiprocessing.context.BaseContext, workers: int) -> Iterator[ProcessPoolExecutor]:
+    """A pool of `workers` local worker processes that die with this process (each watches
+    a lifeline pipe, `_worker_init`) and run its rafostrack; the pipe closed after the pool."""
+    lifeline, keep_alive = ctx.Pipe(duplex=False)  # the workers read; only this process writes
+    try:
+        with ProcessPoolExecutor(
+            max_workers=workers, mp_context=ctx, initializer=_worker_init, initargs=(lifeline, PACKAGE_DIR)
+        ) as pool:
+            yield pool
+    finally:
+        keep_alive.close()
+        lifeline.close()
+
+
 def local_workers(jobs: int, n_tasks: int) -> int:
     """How many worker processes `run_local` starts for `n_tasks` tasks: none for none."""
     return min(jobs, n_tasks) if n_tasks else 0
@@ -209,11 +224,8 @@ def run_local(
         for task in tasks:
             yield _crashed(task, f"a worker process cannot start: {cannot_start}")
         return
-    lifeline, keep_alive = ctx.Pipe(duplex=False)  # the workers read; only this process writes
     try:
-        with ProcessPoolExecutor(
-            max_workers=workers, mp_context=ctx, initializer=_worker_init, initargs=(lifeline, PACKAGE_DIR)
-        ) as pool:
+        with _worker_pool(ctx, workers) as pool:
             with _starting_workers(ctx):
                 futures = {pool.submit(fn, task): task for task in tasks}
             try:
@@ -233,8 +245,6 @@ def run_local(
                 pool.shutdown(wait=True, cancel_futures=True)
                 raise
     finally:
-        keep_alive.close()
-        lifeline.close()
         text = stderr.text_since(stderr_start)
         if text and on_stderr is not None:
             on_stderr(text)
@@ -257,23 +267,16 @@ def ordered_map(jobs: int, client: Any = None) -> Iterator[OrderedMap]:
         yield lambda fn, items: list(map(fn, items))
         return
     ctx = _mp_context()
-    lifeline, keep_alive = ctx.Pipe(duplex=False)
-    try:
-        with ProcessPoolExecutor(
-            max_workers=jobs, mp_context=ctx, initializer=_worker_init, initargs=(lifeline, PACKAGE_DIR)
-        ) as pool:
-            with _starting_workers(ctx):  # every worker starts here, with what it inherits
-                started = [pool.submit(os.getpid) for _ in range(jobs)]
-            try:
-                for future in started:
-                    future.result()
-            except BrokenProcessPool:  # the workers cannot start (the floats' outcomes say why)
-                yield lambda fn, items: list(map(fn, items))
-                return
-            yield _falling_back(lambda fn, items: list(pool.map(fn, items)))
-    finally:
-        keep_alive.close()
-        lifeline.close()
+    with _worker_pool(ctx, jobs) as pool:
+        with _starting_workers(ctx):  # every worker starts here, with what it inherits
+            started = [pool.submit(os.getpid) for _ in range(jobs)]
+        try:
+            for future in started:
+                future.result()
+        except BrokenProcessPool:  # the workers cannot start (the floats' outcomes say why)
+            yield lambda fn, items: list(map(fn, items))
+            return
+        yield _falling_back(lambda fn, items: list(pool.map(fn, items)))
 
 
 def _falling_back(mapped: OrderedMap) -> OrderedMap:
