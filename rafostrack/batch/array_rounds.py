@@ -20,6 +20,7 @@ was made from the same beacons.csv.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +48,7 @@ class ArrayRound:
     rms_residual_s: float
     settled: bool  # the table its floats were tracked with holds the decisions already
     trusted: bool = True  # the floats fit one array (`MissionArray.trusted`)
+    seconds: float = 0.0  # reading the floats' outputs, the fit and its outputs (wall)
 
 
 def calibrated_tables(missions: Sequence[Mission], out: Path) -> dict[str, Path]:
@@ -83,6 +85,7 @@ def fit_mission(
     from ..mission.run import fit_mission_array
     from ..run.one_float import TrackInputs
 
+    started = time.perf_counter()
     tasks = [
         (TrackInputs(float_path=mission.path / f"{float_id}.csv", config_files=config_files, overrides=overrides),
          out / mission.name / float_id)
@@ -114,6 +117,7 @@ def fit_mission(
         rms,
         settled,
         array.is_trusted,
+        time.perf_counter() - started,
     )
     _record(fitted, mission, out, round_)
     return fitted
@@ -162,7 +166,7 @@ def round_line(fitted: ArrayRound, round_: int) -> str:
         what += f"; not settled after {MAX_ROUNDS} rounds: the floats keep the table of the round before"
     return (
         f"mission {fitted.mission}: array fit, round {round_}, {fitted.floats} float(s) fitting it: {what} "
-        f"(their weighted rms residual {fitted.rms_residual_s:.2f} s)"
+        f"(their weighted rms residual {fitted.rms_residual_s:.2f} s; {fitted.seconds:.1f} s)"
     )
 
 
