@@ -10,14 +10,12 @@ import shutil
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from rafostrack.config import load_config
 from rafostrack.errors import InputError, Warnings
 from rafostrack.io.csv_mission import read_arrivals, read_beacons, read_floats
 from rafostrack.motion import ClockWalk, IntegratedOU, RandomWalk
-from rafostrack.summaries.estimates import Estimate
 
 try:
     from hypothesis import HealthCheck, settings
@@ -143,20 +141,3 @@ LINEAR_GAUSSIAN_CASES = {
 }
 # The float clock in the state (the first pass's `ClockWalk`), about a drift model.
 CLOCKED_CASES = {"ou+clock": ClockWalk(LINEAR_GAUSSIAN_CASES["ou"], 2.0, 1.0)}
-
-
-def truth_estimate(sim) -> Estimate:
-    """A 'first pass' made of a simulated float's truth: the true track at every window,
-    every stored TOA labelled with its true source at probability 1 (clutter: no beacon)."""
-    labels = pd.DataFrame(
-        [
-            (w.time, j + 1, t, b, 1.0 if b is not None else 0.0)
-            for w in sim.record.windows
-            for j, (t, b) in enumerate(zip(w.toa_s, w.beacon_id, strict=True))
-        ],
-        columns=["time", "rank", "toa_s", "beacon_id", "prob"],
-    )
-    times = np.array([w.time for w in sim.record.windows], dtype="datetime64[ns]")
-    at = sim.truth.set_index("time").loc[times]
-    track = pd.DataFrame({"time": times, "lat": at["lat"].to_numpy(), "lon": at["lon"].to_numpy(), "ambiguous": False})
-    return Estimate("smoothed", track, labels, pd.DataFrame())

@@ -8,13 +8,13 @@ import dataclasses
 import numpy as np
 import pytest
 from scipy.special import expit
-from support import truth_estimate
 
 from rafostrack.calibrate import MIN_ARRIVALS, Calibration, calibrate
 from rafostrack.calibrate.detection import MIN_OPPORTUNITIES, fit_detection
 from rafostrack.config import load_config, with_overrides
 from rafostrack.model.measurement import predicted_toa_s, window_beacons
 from rafostrack.problem import FloatProblem, ModelValues
+from rafostrack.sim.evaluate import truth_estimate
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import simulate_mission
 from rafostrack.summaries.estimates import Estimate

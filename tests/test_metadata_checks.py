@@ -12,7 +12,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from support import truth_estimate
 
 from rafostrack.calibrate import calibrate
 from rafostrack.calibrate.launch_check import launch_check
@@ -46,6 +45,7 @@ from rafostrack.problem import FloatProblem
 from rafostrack.run import forked
 from rafostrack.run.method import track_record
 from rafostrack.run.passes import Seconds
+from rafostrack.sim.evaluate import truth_estimate
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import simulate_mission
 

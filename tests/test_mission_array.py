@@ -8,7 +8,6 @@ import dataclasses
 import numpy as np
 import pytest
 from scipy import sparse
-from support import truth_estimate
 
 from rafostrack.batch.pool import ordered_map
 from rafostrack.calibrate import kalman
@@ -21,6 +20,7 @@ from rafostrack.mission.array_fit import ArrayLayout, ArrayPriors
 from rafostrack.mission.floats import BANDWIDTH, mission_float, referred
 from rafostrack.mission.schur import FloatBlock, solve_mission
 from rafostrack.model.geodesy import displace
+from rafostrack.sim.evaluate import truth_estimate
 from rafostrack.sim.scenarios import synthetic_scenario
 from rafostrack.sim.simulate import simulate_mission
 

@@ -9,6 +9,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..domain import ArrivalRecord
 from ..model.geodesy import local_offsets_km, range_m
+from ..summaries.estimates import Estimate
+from .simulate import SimulatedFloat
 
 
 def true_labels(record: ArrivalRecord) -> list[str | None]:
@@ -97,3 +99,20 @@ def confidently_wrong(error_km: ArrayLike, sd_km: ArrayLike, min_error_km: float
     under half the error: wrong, and saying otherwise (the worst answer a tracker gives)."""
     error, sd = np.asarray(error_km, dtype=float), np.asarray(sd_km, dtype=float)
     return (error > min_error_km) & (sd < error / 2.0)
+
+
+def truth_estimate(sim: SimulatedFloat) -> Estimate:
+    """A 'first pass' made of a simulated float's truth: the true track at every window,
+    every stored TOA labelled with its true source at probability 1 (clutter: no beacon)."""
+    labels = pd.DataFrame(
+        [
+            (w.time, j + 1, t, b, 1.0 if b is not None else 0.0)
+            for w in sim.record.windows
+            for j, (t, b) in enumerate(zip(w.toa_s, w.beacon_id, strict=True))
+        ],
+        columns=["time", "rank", "toa_s", "beacon_id", "prob"],
+    )
+    times = np.array([w.time for w in sim.record.windows], dtype="datetime64[ns]")
+    at = sim.truth.set_index("time").loc[times]
+    track = pd.DataFrame({"time": times, "lat": at["lat"].to_numpy(), "lon": at["lon"].to_numpy(), "ambiguous": False})
+    return Estimate("smoothed", track, labels, pd.DataFrame())
