@@ -54,6 +54,23 @@ def test_solve_and_log_det_match_dense_numpy(n, b, m):
 
 
 @pytest.mark.parametrize(("n", "b", "m"), CASES)
+def test_whitened_products_match_dense_numpy(n, b, m):
+    """(G^-1 a)'(G^-1 b) = a' N^-1 b for several columns at once, and G^-1 is lower
+    triangular: the first k entries of G^-1 a depend on a's first k entries alone."""
+    dense = _bordered_banded(n, b, m, seed=3 * n + b + m)
+    factor = _factor(dense, n, b)
+    rng = np.random.default_rng(2)
+    columns = rng.normal(size=(n + m, 5))
+    whitened = factor.whitened(columns)
+    want = columns.T @ np.linalg.solve(dense, columns)
+    assert np.linalg.norm(whitened.T @ whitened - want) <= 1e-9 * np.linalg.norm(want)
+    k = (n + m) // 2
+    changed = columns.copy()
+    changed[k:] = rng.normal(size=changed[k:].shape)
+    np.testing.assert_array_equal(factor.whitened(changed)[:k], whitened[:k])
+
+
+@pytest.mark.parametrize(("n", "b", "m"), CASES)
 def test_selected_inverse_matches_dense_inverse(n, b, m):
     dense = _bordered_banded(n, b, m, seed=100 + n + 7 * b + 31 * m)
     factor = _factor(dense, n, b, fmt="coo")

@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 from scipy import sparse
-from scipy.linalg import cho_factor, cho_solve, cho_solve_banded, cholesky_banded
+from scipy.linalg import cho_factor, cho_solve, cho_solve_banded, cholesky_banded, solve_triangular
 from scipy.linalg.lapack import dtbtrs
 
 
@@ -68,6 +68,16 @@ class BorderedBanded:
     def schur_solve(self, rhs: NDArray) -> NDArray[np.float64]:
         """S^-1 rhs."""
         return cho_solve(self.schur, rhs) if len(rhs) else np.zeros_like(rhs)
+
+    def whitened(self, rhs: NDArray) -> NDArray[np.float64]:
+        """G^-1 rhs, where N = G G' with G = [[L, 0], [H', M]] (B = L L', H = L^-1 C, S = M M'):
+        for a product a' N^-1 b = (G^-1 a)'(G^-1 b), one triangular solve against `solve`'s two
+        Cholesky solves."""
+        top, info = dtbtrs(self.chol, rhs[: self.n], uplo="L")
+        if info != 0:
+            raise np.linalg.LinAlgError(f"banded triangular solve failed (LAPACK info {info})")
+        bottom = rhs[self.n :] - np.einsum("nk,n...->k...", self.half, top)
+        return np.concatenate([top, solve_triangular(self.schur[0], bottom, lower=True) if len(bottom) else bottom])
 
     def solve(self, rhs: NDArray) -> NDArray[np.float64]:
         """N^-1 rhs (block elimination)."""

@@ -73,10 +73,12 @@ class FloatBlock:
 
     def reduced(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """E_f - C_f' N_f^-1 C_f and b_f,th - C_f' N_f^-1 b_f: the float's terms on theta
-        with its own unknowns eliminated."""
-        through = self.own.solve(np.column_stack([self.coupling, self.own_rhs]))
-        reduced = self.corner - np.einsum("nk,nl->kl", self.coupling, through[:, :-1])
-        return 0.5 * (reduced + reduced.T), self.array_rhs - np.einsum("nk,n->k", self.coupling, through[:, -1])
+        with its own unknowns eliminated, each product as W'W with W = G_f^-1 [C_f, b_f]
+        (N_f = G_f G_f', `BorderedBanded.whitened`)."""
+        whitened = self.own.whitened(np.column_stack([self.coupling, self.own_rhs]))
+        coupling, own_rhs = whitened[:, :-1], whitened[:, -1]
+        reduced = self.corner - np.einsum("nk,nl->kl", coupling, coupling)
+        return 0.5 * (reduced + reduced.T), self.array_rhs - np.einsum("nk,n->k", coupling, own_rhs)
 
     def back_substituted(self, d_theta: NDArray) -> NDArray[np.float64]:
         """dx_f = N_f^-1 (b_f - C_f dth_f), dth_f the float's columns of dth."""
