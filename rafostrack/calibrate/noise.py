@@ -25,11 +25,17 @@ from ..domain import ArrivalRecord, FloatInfo
 from ..model.measurement import horizon_s, toa_logpdf
 
 
-def fit_multipath(residual_s: NDArray, toa_sigma_s: float, model: ModelConfig) -> tuple[float, float]:
+# Nelder-Mead's tolerances (xatol in logit eps and log tau, fatol in log-likelihood).
+TOLERANCE = (1e-4, 1e-6)
+
+
+def fit_multipath(
+    residual_s: NDArray, toa_sigma_s: float, model: ModelConfig, tolerance: tuple[float, float] = TOLERANCE
+) -> tuple[float, float]:
     """(eps, tau) maximising sum log f(r) with sigma fixed at `toa_sigma_s` (the EM step
     of the timing fit: sigma itself comes from the Kalman smoother's marginal likelihood);
     eps in [1e-4, 0.3], tau in [8, 200] s (a delay shorter than a few sigma would be
-    indistinguishable from the Gaussian core, and take part of it)."""
+    indistinguishable from the Gaussian core, and take part of it), to `tolerance`."""
     r = np.clip(np.asarray(residual_s, dtype=float), -300.0, 300.0)
 
     def unpack(p: NDArray) -> ModelConfig:
@@ -44,7 +50,8 @@ def fit_multipath(residual_s: NDArray, toa_sigma_s: float, model: ModelConfig) -
         return -float(np.sum(toa_logpdf(r, unpack(p))))
 
     start = np.array([logit(min(max(model.multipath_fraction, 0.02), 0.5)), np.log(model.multipath_delay_s)])
-    best = minimize(cost, start, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-6, "maxiter": 1000})
+    xatol, fatol = tolerance
+    best = minimize(cost, start, method="Nelder-Mead", options={"xatol": xatol, "fatol": fatol, "maxiter": 1000})
     fitted = unpack(best.x)
     return fitted.multipath_fraction, fitted.multipath_delay_s
 
@@ -72,12 +79,13 @@ def clutter_exposure(record: ArrivalRecord, info: FloatInfo) -> float:
 class MultipathEM:
     """The arrivals' direct-path weights for `kalman.fit`, multipath refitted by EM at each call."""
 
-    def __init__(self, model: ModelConfig):
+    def __init__(self, model: ModelConfig, tolerance: tuple[float, float] = TOLERANCE):
         self.model = model
+        self.tolerance = tolerance
 
     def weight_of(self, residual_s: NDArray, toa_sigma_s: float) -> NDArray:
         """P(direct) of each residual, under multipath fitted to them (`fit_multipath`)."""
-        eps, tau = fit_multipath(residual_s, toa_sigma_s, self.model)
+        eps, tau = fit_multipath(residual_s, toa_sigma_s, self.model, self.tolerance)
         self.model = dataclasses.replace(
             self.model, toa_sigma_s=toa_sigma_s, multipath_fraction=eps, multipath_delay_s=tau
         )

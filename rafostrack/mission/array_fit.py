@@ -41,6 +41,10 @@ from .schur import FloatBlock, solve_mission
 SOURCE_BLOCKS = ("offset_s", "drift_s_per_day", "slowness_s_per_m", "east_km", "north_km")
 ITERATIONS = 6
 GATE_S = 60.0  # an arrival's residual beyond this: weight 0 (`_refitted_noise`)
+# The arrivals' multipath refitted at each step to 0.01 in logit eps, log tau and the
+# log-likelihood (`noise.fit_multipath`'s tolerances): weights one Gauss-Newton step behind
+# need no more, and Nelder-Mead takes half the evaluations of the calibration's tolerances.
+MULTIPATH_TOLERANCE = (1e-2, 1e-2)
 SIGMA_CAP = 3.0  # a float's TOA sd at most this many times the configured one
 # The most a Gauss-Newton step moves a source's unknown, per `SOURCE_BLOCKS` (None: free).
 STEP_LIMITS = (20.0, 0.02, None, 20.0, 20.0)
@@ -241,7 +245,7 @@ def fit_array(
     array_priors = ArrayPriors.of(layout, priors, s0, released)
     information = np.diag(1.0 / array_priors.sd() ** 2)
     columns = [layout.float_columns(f) for f in floats]
-    noise = [MultipathEM(config.model) for _ in floats]
+    noise = [MultipathEM(config.model, MULTIPATH_TOLERANCE) for _ in floats]
     cap = SIGMA_CAP * config.model.toa_sigma_s
     for step in range(iterations + 1):
         last = step == iterations  # the covariance at the solution, no further move
