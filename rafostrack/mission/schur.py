@@ -47,47 +47,8 @@ from ..calibrate.banded import BorderedBanded
 
 
 @dataclass(frozen=True)
-class FloatBlock:
-    """One float's rows of the mission's normal equations: its own block N_f factored, its
-    coupling C_f to the array columns it touches, its terms E_f on them, the right-hand
-    sides, and where those columns are in the mission's theta."""
-
-    own: BorderedBanded  # N_f
-    coupling: NDArray[np.float64]  # (n_f, m_f) C_f
-    corner: NDArray[np.float64]  # (m_f, m_f) E_f
-    own_rhs: NDArray[np.float64]  # (n_f,) b_f
-    array_rhs: NDArray[np.float64]  # (m_f,) b_f,th
-    columns: NDArray[np.intp]  # (m_f,) index in theta of each array column
-
-    @classmethod
-    def of(
-        cls, normal: sparse.spmatrix, rhs: NDArray, n_band: int, bandwidth: int, n_own: int, columns: NDArray
-    ) -> FloatBlock:
-        """Split a float's normal matrix and right-hand side, ordered (its n_band banded
-        unknowns, its other own unknowns up to n_own, then the array's), into the blocks."""
-        normal = sparse.csr_matrix(normal)
-        own = BorderedBanded(normal[:n_own, :n_own], n_band, bandwidth)
-        coupling = normal[:n_own, n_own:].toarray()
-        corner = normal[n_own:, n_own:].toarray()
-        return cls(own, coupling, corner, rhs[:n_own], rhs[n_own:], np.asarray(columns, dtype=np.intp))
-
-    def reduced(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """E_f - C_f' N_f^-1 C_f and b_f,th - C_f' N_f^-1 b_f: the float's terms on theta
-        with its own unknowns eliminated, each product as W'W with W = G_f^-1 [C_f, b_f]
-        (N_f = G_f G_f', `BorderedBanded.whitened`)."""
-        whitened = self.own.whitened(np.column_stack([self.coupling, self.own_rhs]))
-        coupling, own_rhs = whitened[:, :-1], whitened[:, -1]
-        reduced = self.corner - np.einsum("nk,nl->kl", coupling, coupling)
-        return 0.5 * (reduced + reduced.T), self.array_rhs - np.einsum("nk,n->k", coupling, own_rhs)
-
-    def back_substituted(self, d_theta: NDArray) -> NDArray[np.float64]:
-        """dx_f = N_f^-1 (b_f - C_f dth_f), dth_f the float's columns of dth."""
-        return self.own.solve(self.own_rhs - self.coupling @ d_theta[self.columns])
-
-
-@dataclass(frozen=True)
 class ReducedTerms:
-    """A float's terms on theta with its own unknowns eliminated (`FloatBlock.reduced`)."""
+    """A float's terms on theta with its own unknowns eliminated (`reduced_terms`)."""
 
     schur: NDArray[np.float64]  # (m_f, m_f) E_f - C_f' N_f^-1 C_f
     rhs: NDArray[np.float64]  # (m_f,) b_f,th - C_f' N_f^-1 b_f
@@ -99,6 +60,48 @@ class ReducedTerms:
         schur[np.ix_(self.columns, self.columns)] = self.schur
         np.add.at(rhs, self.columns, self.rhs)
         return schur, rhs
+
+
+def reduced_terms(
+    own: BorderedBanded, coupling: NDArray, corner: NDArray, own_rhs: NDArray, array_rhs: NDArray, columns: NDArray
+) -> ReducedTerms:
+    """E_f - C_f' N_f^-1 C_f and b_f,th - C_f' N_f^-1 b_f: a float's terms on theta with its
+    own unknowns eliminated, each product as W'W with W = G_f^-1 [C_f, b_f] (N_f = G_f G_f',
+    `BorderedBanded.whitened`)."""
+    whitened = own.whitened(np.column_stack([coupling, own_rhs]))
+    w_coupling, w_rhs = whitened[:, :-1], whitened[:, -1]
+    reduced = corner - np.einsum("nk,nl->kl", w_coupling, w_coupling)
+    return ReducedTerms(0.5 * (reduced + reduced.T), array_rhs - np.einsum("nk,n->k", w_coupling, w_rhs), columns)
+
+
+@dataclass(frozen=True)
+class FloatBlock:
+    """One float's rows of the mission's normal equations: its own block N_f factored, its
+    coupling C_f to the array columns it touches and its own right-hand side (for the
+    back-substitution), and its reduced terms on theta (made with the block, in the process
+    that linearised the float)."""
+
+    own: BorderedBanded  # N_f
+    coupling: NDArray[np.float64]  # (n_f, m_f) C_f
+    own_rhs: NDArray[np.float64]  # (n_f,) b_f
+    terms: ReducedTerms  # its columns: where C_f's are in theta
+
+    @classmethod
+    def of(
+        cls, normal: sparse.spmatrix, rhs: NDArray, n_band: int, bandwidth: int, n_own: int, columns: NDArray
+    ) -> FloatBlock:
+        """Split a float's normal matrix and right-hand side, ordered (its n_band banded
+        unknowns, its other own unknowns up to n_own, then the array's), into the blocks."""
+        normal = sparse.csr_matrix(normal)
+        own = BorderedBanded(normal[:n_own, :n_own], n_band, bandwidth)
+        coupling = normal[:n_own, n_own:].toarray()
+        corner = normal[n_own:, n_own:].toarray()
+        terms = reduced_terms(own, coupling, corner, rhs[:n_own], rhs[n_own:], np.asarray(columns, dtype=np.intp))
+        return cls(own, coupling, rhs[:n_own], terms)
+
+    def back_substituted(self, d_theta: NDArray) -> NDArray[np.float64]:
+        """dx_f = N_f^-1 (b_f - C_f dth_f), dth_f the float's columns of dth."""
+        return self.own.solve(self.own_rhs - self.coupling @ d_theta[self.terms.columns])
 
 
 @dataclass(frozen=True)
@@ -149,7 +152,7 @@ def array_system(
 
 def solve_mission(blocks: Sequence[FloatBlock], prior_information: NDArray, prior_rhs: NDArray) -> ArraySolution:
     """The whole system's solution: theta's from S, then each float's by back-substitution."""
-    terms = [ReducedTerms(*b.reduced(), b.columns) for b in blocks]
+    terms = [b.terms for b in blocks]
     schur, rhs = array_system(terms, prior_information, prior_rhs)
     factor = cho_factor(schur, lower=True)
     d_theta = cho_solve(factor, rhs)
