@@ -3,6 +3,7 @@ a simulated mission whose table carries several faults at once."""
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 
 import numpy as np
@@ -14,10 +15,11 @@ from rafostrack.calibrate import kalman
 from rafostrack.calibrate.kalman_problem import NODE
 from rafostrack.calibrate.metadata_checks import CONSISTENT, CONTRADICTED
 from rafostrack.config import load_config
-from rafostrack.mission.array import calibrated_array
+from rafostrack.mission.array import calibrated_array, released_in
 from rafostrack.mission.array_checks import array_values
 from rafostrack.mission.array_fit import ArrayLayout, ArrayPriors
 from rafostrack.mission.floats import BANDWIDTH, mission_float, referred
+from rafostrack.mission.outputs import ARRAY_NAME, CALIBRATED_NAME, write_array_outputs
 from rafostrack.mission.schur import FloatBlock, solve_mission
 from rafostrack.model.geodesy import displace
 from rafostrack.sim.evaluate import truth_estimate
@@ -179,6 +181,44 @@ def test_a_mission_names_several_faults_at_once_and_recovers_them_within_two_sd(
         table.offset_s[[0, *range(2, N_BEACONS)]], faulted.offset_s[[0, *range(2, N_BEACONS)]]
     )
     assert table.offset_s[1] == offset.supported
+
+
+def test_the_values_the_floats_were_tracked_with_start_released(mission, tmp_path):
+    """A later round: the floats tracked with the calibrated table (here, the truth's labels
+    and tracks with its decided values). Those values start released and are decided again
+    within 2 sd of the truth; the table as given releases nothing. Written with that table
+    kept, array.csv's `calibrated` names what the kept table holds, and a kept table stays
+    even when this round decides nothing."""
+    beacons, simulated = mission
+    faulted = _faulted(beacons)
+    first = calibrated_array(_floats(faulted, simulated), faulted, CONFIG)
+    table = first.calibrated_beacons()
+    layout = first.fit.layout
+    assert not released_in(layout, faulted, faulted).any()
+    released = released_in(layout, faulted, table)
+    assert {(int(layout.sources[g]), b) for g, b in zip(*np.nonzero(released), strict=True)} == {
+        (1, 0), (4, 1), (6, 3), (6, 4)
+    }  # fmt: skip
+    later = calibrated_array(_floats(faulted, simulated), faulted, CONFIG, tracked_with=table)
+    assert {(v.check.id, v.check.field) for v in later.decided()} == {
+        ("B2", "offset_s"), ("B5", "drift_s_per_day"), ("B7", "position")
+    }  # fmt: skip
+    offset = next(v.check for v in later.values if (v.check.id, v.check.field) == ("B2", "offset_s"))
+    assert abs(offset.supported - beacons.offset_s[1]) < 2 * offset.sd
+
+    given = tmp_path / "beacons.csv"
+    given.write_text("beacon_id,lat,lon,offset_s\n" + "".join(f"B{k + 1},0,0,0\n" for k in range(N_BEACONS)))
+    (tmp_path / CALIBRATED_NAME).write_text("kept\n")
+    nothing = dataclasses.replace(later, released=np.zeros_like(later.released))  # decides nothing
+    assert nothing.decided() == []
+    write_array_outputs(nothing, tmp_path, given, plots=False, kept=table)
+    assert (tmp_path / CALIBRATED_NAME).read_text() == "kept\n"
+    rows = list(csv.DictReader((tmp_path / ARRAY_NAME).open()))
+    assert {(r["source"], r["field"]) for r in rows if r["calibrated"] == "True"} == {
+        ("B2", "offset_s"), ("B5", "drift_s_per_day"), ("B7", "position")
+    }  # fmt: skip
+    write_array_outputs(nothing, tmp_path, given, plots=False)
+    assert not (tmp_path / CALIBRATED_NAME).exists()
 
 
 def test_a_mission_with_correct_tables_finds_nothing(mission):

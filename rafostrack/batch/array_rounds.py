@@ -94,17 +94,20 @@ def fit_mission(
     ]  # fmt: skip
     mapped = map_floats or map
     tracked = [t for t in mapped(_tracked_or_none, tasks) if t is not None]
-    fitted_mission = fit_mission_array(tracked, mapped)
+    previous = calibrated_tables([mission], out).get(mission.name)
+    try:
+        tracked_with = read_beacons(previous) if previous is not None else None
+    except InputError:  # an earlier run's table that no longer reads: written anew
+        tracked_with = None
+    fitted_mission = fit_mission_array(tracked, mapped, tracked_with)
     if fitted_mission is None:
         return None
     array = fitted_mission.array
-    previous = calibrated_tables([mission], out).get(mission.name)
-    try:
-        settled = previous is not None and array.settled_in(read_beacons(previous))
-    except InputError:  # an earlier run's table that no longer reads: written anew
-        settled = False
-    keep = settled or (previous is not None and round_ == MAX_ROUNDS)
-    write_array_outputs(array, out / mission.name, mission.path / "beacons.csv", plots=plots, keep_calibrated=keep)
+    settled = tracked_with is not None and array.settled_in(tracked_with)
+    keep = settled or (tracked_with is not None and round_ == MAX_ROUNDS)
+    write_array_outputs(
+        array, out / mission.name, mission.path / "beacons.csv", plots=plots, kept=tracked_with if keep else None
+    )
     decided = [f"{v.check.id} {v.check.field}" for v in array.decided()]
     sigma = tracked[0].problem.config.model.toa_sigma_s
     rms = array.rms_residual_s(sigma)

@@ -24,7 +24,6 @@ from ..config import ModelConfig
 from ..domain import ArrivalRecord, FloatInfo
 from ..model.measurement import horizon_s, toa_logpdf
 
-
 # Nelder-Mead's tolerances (xatol in logit eps and log tau, fatol in log-likelihood).
 TOLERANCE = (1e-4, 1e-6)
 

@@ -11,6 +11,12 @@ so, and not corrected.
 Each value is judged with its sd widened to the floats' spread where that is wider
 (`array_checks.widening`): the floats, not their arrivals, are the mission's independent
 units.
+
+In a later round the floats were tracked with the values an earlier round decided: those
+start released (`released_in`). Their tracks and labels fit those values, not the table's;
+held at the table's under its tight prior, such a value is judged by extrapolating the
+linearised fit from the wrong side (a position 38 km off, corrected in the tracking, was
+estimated at 12, then at 103-125 km, as the other releases went by).
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ from ..config import Config
 from ..domain import BeaconTable
 from ..model.geodesy import local_offsets_km
 from .array_checks import RELEASES, ArrayValue, array_values, strongest_contradiction
-from .array_fit import SOURCE_BLOCKS, ArrayFit, FloatMap, fit_array
+from .array_fit import SOURCE_BLOCKS, ArrayFit, ArrayLayout, FloatMap, fit_array
 from .floats import MissionFloat
 
 MAX_RELEASES = 12
@@ -132,14 +138,44 @@ def array_priors(config: Config) -> kalman.KalmanPriors:
     return kalman.DEFAULT_PRIORS
 
 
+def changed_values(beacons: BeaconTable, table: BeaconTable) -> dict[str, NDArray[np.bool_]]:
+    """Per field of `RELEASES`, the rows where `table` (made from `beacons`, with some cells
+    changed) holds another value than `beacons`; none where its sources are not the same."""
+    if not np.array_equal(table.beacon_id, beacons.beacon_id):
+        return {field: np.zeros(len(beacons), dtype=bool) for field in RELEASES}
+    return {
+        "offset_s": table.offset_s != beacons.offset_s,
+        "drift_s_per_day": table.drift_s_per_day != beacons.drift_s_per_day,
+        "position": (table.lat != beacons.lat) | (table.lon != beacons.lon),
+    }
+
+
+def released_in(layout: ArrayLayout, beacons: BeaconTable, tracked_with: BeaconTable | None) -> NDArray[np.bool_]:
+    """(G, 5) by source and theta block: the values in which `tracked_with`, the table the
+    floats were tracked with, differs from `beacons` as given (none without one)."""
+    released = np.zeros((len(layout.sources), len(SOURCE_BLOCKS)), dtype=bool)
+    if tracked_with is None:
+        return released
+    for field, moved in changed_values(beacons, tracked_with).items():
+        for block in RELEASES[field]:
+            released[:, block] |= moved[layout.sources]
+    return released
+
+
 def calibrated_array(
-    floats: Sequence[MissionFloat], beacons: BeaconTable, config: Config, map_floats: FloatMap = map
+    floats: Sequence[MissionFloat],
+    beacons: BeaconTable,
+    config: Config,
+    map_floats: FloatMap = map,
+    tracked_with: BeaconTable | None = None,
 ) -> MissionArray:
     """Fit the array on `floats`, judge its values and release the contradicted ones one at
-    a time, strongest first (module docstring); `map_floats` maps the fit's per-float work."""
+    a time, strongest first (module docstring), those the floats were tracked with
+    (`tracked_with`, when not the table as given) released from the start; `map_floats`
+    maps the fit's per-float work."""
     priors = array_priors(config)
-    fit = fit_array(floats, config, priors=priors, map_floats=map_floats)
-    released = np.zeros((len(fit.layout.sources), len(SOURCE_BLOCKS)), dtype=bool)
+    released = released_in(ArrayLayout.of(floats), beacons, tracked_with)
+    fit = fit_array(floats, config, released, priors=priors, map_floats=map_floats)
     values = array_values(fit, beacons, config.checks)
     for _ in range(MAX_RELEASES):
         worst = strongest_contradiction(values, released)
@@ -164,4 +200,4 @@ def _untrusted(check: MetadataCheck) -> MetadataCheck:
     return dataclasses.replace(check, outcome=UNDETERMINED, note=UNTRUSTED_NOTE)
 
 
-__all__ = ["MAX_RELEASES", "MissionArray", "array_priors", "calibrated_array"]
+__all__ = ["MAX_RELEASES", "MissionArray", "array_priors", "calibrated_array", "changed_values", "released_in"]

@@ -11,11 +11,12 @@ from typing import Any
 import numpy as np
 
 from ..calibrate import kalman
+from ..domain import BeaconTable
 from ..io.atomic import write_text_atomic
 from ..io.table_text import with_cells
 from ..io.writers import csv_text
 from ..plots.array_residuals import SourcePanel, plot_array_residuals
-from .array import MissionArray
+from .array import MissionArray, changed_values
 
 ARRAY_NAME = "array.csv"
 CALIBRATED_NAME = "beacons-calibrated.csv"
@@ -33,10 +34,11 @@ ARRAY_COLUMNS = ("source", "field", "given", "estimated", "shift", "sd", "unit",
                  "arrivals", "line")  # fmt: skip
 
 
-def array_rows(array: MissionArray) -> list[dict[str, Any]]:
+def array_rows(array: MissionArray, in_table: set[tuple[str, str]] | None = None) -> list[dict[str, Any]]:
     """`array.csv`'s rows: per source and field, given, estimated (the arrivals' value), sd,
-    unit, outcome, whether the calibrated table uses the estimate, floats and arrivals."""
-    decided = {(v.check.id, v.check.field) for v in array.decided()}
+    unit, outcome, whether the calibrated table holds a value other than the given one
+    (`in_table`, by (source, field); by default the decided ones), floats and arrivals."""
+    decided = {(v.check.id, v.check.field) for v in array.decided()} if in_table is None else in_table
     rows = []
     for v in array.values:
         c = v.check
@@ -103,23 +105,26 @@ def _titles(array: MissionArray) -> list[str]:
 
 
 def write_array_outputs(
-    array: MissionArray, out_dir: Path, beacons_path: Path, plots: bool = True, keep_calibrated: bool = False
+    array: MissionArray, out_dir: Path, beacons_path: Path, plots: bool = True, kept: BeaconTable | None = None
 ) -> list[Path]:
     """`array.csv`, `beacons-calibrated.csv` (when the mission decided a value; an old one is
-    removed otherwise; left as it is with `keep_calibrated`: it holds the decisions already,
-    `MissionArray.settled_in`) and `array.png` in `out_dir`, each written atomically."""
+    removed otherwise; left as it is when `kept`, the table in it, is the one the floats
+    keep: it holds the decisions already, `MissionArray.settled_in`, or the last round
+    leaves the floats with it; array.csv's `calibrated` then says what it holds) and
+    `array.png` in `out_dir`, each written atomically."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out_dir / ARRAY_NAME, csv_text(ARRAY_COLUMNS, array_rows(array)))
-    written = [out_dir / ARRAY_NAME]
     calibrated = out_dir / CALIBRATED_NAME
-    if array.decided() and keep_calibrated and calibrated.is_file():
-        written.append(calibrated)
+    in_table = None
+    if kept is not None and calibrated.is_file():
+        changed = changed_values(array.beacons, kept).items()
+        in_table = {(str(array.beacons.beacon_id[r]), field) for field, moved in changed for r in np.flatnonzero(moved)}
     elif array.decided():
         with open(beacons_path, encoding="utf-8", newline="") as table:  # its own line ends
             write_text_atomic(calibrated, calibrated_text(array, table.read()))
-        written.append(calibrated)
     else:
         calibrated.unlink(missing_ok=True)
+    write_text_atomic(out_dir / ARRAY_NAME, csv_text(ARRAY_COLUMNS, array_rows(array, in_table)))
+    written = [out_dir / ARRAY_NAME] + ([calibrated] if calibrated.is_file() else [])
     if plots:
         names = [f.float_id for f in array.fit.floats]
         written.append(plot_array_residuals(out_dir / ARRAY_PLOT_NAME, source_panels(array), names))

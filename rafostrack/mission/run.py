@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from ..domain import BeaconTable
 from .array import MissionArray, calibrated_array
 from .array_fit import FloatMap
 from .floats import mission_float
@@ -22,10 +23,13 @@ class MissionFit:
     piles: list[Pile]
 
 
-def fit_mission_array(tracked: Sequence[TrackedFloat], map_floats: FloatMap = map) -> MissionFit | None:
+def fit_mission_array(
+    tracked: Sequence[TrackedFloat], map_floats: FloatMap = map, tracked_with: BeaconTable | None = None
+) -> MissionFit | None:
     """Scan, relabel, fit and judge (module docstring); None when no float has enough
     confident arrivals. The mission's configuration and tables are its first float's;
-    `map_floats` maps the fit's per-float work (`array_fit.float_step`)."""
+    `map_floats` maps the fit's per-float work (`array_fit.float_step`); `tracked_with`: the
+    table the floats were tracked with, when not the one as given (`calibrated_array`)."""
     if not tracked:
         return None
     piles = scan_sources([(t.estimate, t.problem) for t in tracked])
@@ -39,4 +43,4 @@ def fit_mission_array(tracked: Sequence[TrackedFloat], map_floats: FloatMap = ma
     if not floats:
         return None
     first = tracked[0].problem
-    return MissionFit(calibrated_array(floats, first.beacons, first.config, map_floats), piles)
+    return MissionFit(calibrated_array(floats, first.beacons, first.config, map_floats, tracked_with), piles)
