@@ -130,6 +130,7 @@ class ChecksConfig:
     source_scan: bool = setting()
     z_score: float = setting("> 0", _positive)
     launch_z_score: float = setting("> 0", _positive)
+    mission_z_score: float = setting("> 0", _positive)
     fix_tolerance_km: float = setting("> 0", _positive)
     position_tolerance_km: float = setting("> 0", _positive)
     clock_tolerance_s: float = setting("> 0", _positive)

@@ -13,7 +13,8 @@ from scipy import sparse
 from rafostrack.batch.pool import ordered_map
 from rafostrack.calibrate import kalman
 from rafostrack.calibrate.kalman_problem import NODE
-from rafostrack.calibrate.metadata_checks import CONSISTENT, CONTRADICTED
+from rafostrack.calibrate.metadata_checks import CONSISTENT, CONTRADICTED, UNDETERMINED
+from rafostrack.calibrate.value_check import z_of
 from rafostrack.config import load_config
 from rafostrack.mission.array import calibrated_array, released_in
 from rafostrack.mission.array_checks import array_values
@@ -181,6 +182,23 @@ def test_a_mission_names_several_faults_at_once_and_recovers_them_within_two_sd(
         table.offset_s[[0, *range(2, N_BEACONS)]], faulted.offset_s[[0, *range(2, N_BEACONS)]]
     )
     assert table.offset_s[1] == offset.supported
+
+
+def test_the_mission_judges_its_values_at_its_own_z_score(mission):
+    """`[checks] mission_z_score` sets where a mission's value is contradicted, a float's
+    `z_score` does not: with the mission's just beyond a fault's z, that fault is undetermined."""
+    beacons, simulated = mission
+    faulted = _faulted(beacons)
+    fit = calibrated_array(_floats(faulted, simulated), faulted, CONFIG).fit
+
+    def judged(checks):
+        return {(v.check.id, v.check.field): v.check for v in array_values(fit, faulted, checks)}
+
+    drift = judged(CONFIG.checks)["B5", "drift_s_per_day"]
+    assert drift.outcome == CONTRADICTED
+    assert judged(dataclasses.replace(CONFIG.checks, z_score=100.0)) == judged(CONFIG.checks)
+    stricter = dataclasses.replace(CONFIG.checks, mission_z_score=1.05 * z_of(drift))
+    assert judged(stricter)["B5", "drift_s_per_day"].outcome == UNDETERMINED
 
 
 def test_the_values_the_floats_were_tracked_with_start_released(mission, tmp_path):

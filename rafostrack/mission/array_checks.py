@@ -6,7 +6,7 @@ clocks, mean current) already eliminated (`schur`): a float's clock error is its
 only a source's values shared by all its floats are left. As a float's checks do
 (`calibrate.metadata_checks`), a value's prior is taken out of its marginal to give the
 arrivals' own estimate (`data_only`), judged by the same rule (`outcome_of`: contradicted
-beyond `[checks] z_score` sds and the value's tolerance; consistent within it; else
+beyond `[checks] mission_z_score` sds and the value's tolerance; consistent within it; else
 undetermined), its sd widened to the floats' jackknife spread where that is wider
 (`widening`). Per source, the offset at the table's epoch (o = a - d mid) and the drift
 from the joint estimate of (a, d); the position from that of (east, north, a, d), judged
@@ -106,6 +106,7 @@ def array_values(fit: ArrayFit, beacons: BeaconTable, checks: ChecksConfig, wide
     undetermined beyond `PLAUSIBLE`; `widen=False` judges by the arrivals' noise alone, as
     if every arrival were independent."""
     floats, arrivals = support(fit)
+    checks = dataclasses.replace(checks, z_score=checks.mission_z_score)
     found = []
     for g, row in enumerate(fit.layout.sources):
         judged = arrivals[g] >= MIN_SOURCE_ARRIVALS
