@@ -147,11 +147,12 @@ class FloatTask:
 @dataclass(frozen=True)
 class FloatStep:
     """What a float's task gives: its block of the normal equations, its arrivals' residuals,
-    and, refitted from those residuals, the float (its TOA sd), its weights and its noise."""
+    and, refitted from those residuals, its hyperparameters (its TOA sd), its weights and its
+    noise (not the float itself: its problem would cross between processes twice a step)."""
 
     block: FloatBlock
     residual_s: NDArray[np.float64]
-    float_: MissionFloat
+    hyper: kalman.Hyper
     weight: NDArray[np.float64]
     noise: MultipathEM
 
@@ -167,9 +168,9 @@ def float_step(task: FloatTask) -> FloatStep:
     normal = lin.normal(f.hyper)
     block = FloatBlock.of(normal.jtj, -normal.jtr, NODE * f.problem.n_nodes, BANDWIDTH, f.n_own, task.columns)
     if not task.refit:
-        return FloatStep(block, lin.toa_residual_s, f, task.weight, task.noise)
-    refitted, weight = _refitted_noise(f, lin.toa_residual_s, task.noise, task.sigma_cap_s)
-    return FloatStep(block, lin.toa_residual_s, refitted, weight, task.noise)
+        return FloatStep(block, lin.toa_residual_s, f.hyper, task.weight, task.noise)
+    hyper, weight = _refitted_noise(f, lin.toa_residual_s, task.noise, task.sigma_cap_s)
+    return FloatStep(block, lin.toa_residual_s, hyper, weight, task.noise)
 
 
 def _step_scale(d_theta: NDArray, layout: ArrayLayout) -> float:
@@ -189,7 +190,7 @@ def _step_scale(d_theta: NDArray, layout: ArrayLayout) -> float:
 
 def _refitted_noise(
     f: MissionFloat, residual_s: NDArray, noise: MultipathEM, sigma_cap_s: float
-) -> tuple[MissionFloat, NDArray]:
+) -> tuple[kalman.Hyper, NDArray]:
     """The float's arrivals' direct-path weights (multipath by EM; none beyond `GATE_S`:
     an arrival so far off is not the labelled source's, or the float's track is not where
     the float was) and its TOA sd from the weighted residuals, sigma^2 = sum w r^2 / sum w,
@@ -198,7 +199,7 @@ def _refitted_noise(
     weight = np.where(np.abs(residual_s) <= GATE_S, noise.weight_of(residual_s, f.hyper.toa_sigma_s), 0.0)
     sigma = float(np.sqrt(np.sum(weight * residual_s**2) / max(np.sum(weight), 1.0)))
     sigma = float(np.clip(sigma, kalman.Hyper.LOWER[2], sigma_cap_s))
-    return dataclasses.replace(f, hyper=dataclasses.replace(f.hyper, toa_sigma_s=sigma)), weight
+    return dataclasses.replace(f.hyper, toa_sigma_s=sigma), weight
 
 
 def _median_offsets(layout: ArrayLayout, floats: Sequence[MissionFloat], priors: kalman.KalmanPriors) -> NDArray:
@@ -261,6 +262,7 @@ def fit_array(
         scale = _step_scale(solution.d_theta, layout)
         theta = theta + scale * solution.d_theta
         own = [x + scale * dx for x, dx in zip(own, solution.d_own, strict=True)]
-        floats, weight, noise = [s.float_ for s in steps], [s.weight for s in steps], [s.noise for s in steps]
+        floats = [dataclasses.replace(f, hyper=s.hyper) for f, s in zip(floats, steps, strict=True)]
+        weight, noise = [s.weight for s in steps], [s.noise for s in steps]
     covariance, jackknife = solution.covariance(), solution.jackknife_covariance()
     return ArrayFit(layout, floats, theta, covariance, jackknife, own, weight, residuals, array_priors, s0)
