@@ -186,7 +186,7 @@ def calibrated_array(
             fit.floats, config, released, start=fit, priors=priors, iterations=RELEASE_ITERATIONS, map_floats=map_floats
         )
         values = array_values(fit, beacons, config.checks)
-    array = MissionArray(fit, values, released, beacons)
+    array = MissionArray(dataclasses.replace(fit, blocks=[]), values, released, beacons)
     if array.trusted(config.model.toa_sigma_s):
         return array
     undecided = [dataclasses.replace(v, check=_untrusted(v.check)) for v in values]

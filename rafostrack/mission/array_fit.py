@@ -119,6 +119,9 @@ class ArrayFit:
     toa_residual_s: list[NDArray[np.float64]]
     priors: ArrayPriors
     s0: float  # the configured slowness (s/m)
+    # per float, its block at the fit (the last step's), from which a fit started here
+    # begins (`_restarted`); empty once the fit is judged (`MissionArray`)
+    blocks: list[FloatBlock] = dataclasses.field(default_factory=list, repr=False)
 
     def correction(self, block: int) -> NDArray[np.float64]:
         """(G,) each source's fitted correction of `block`."""
@@ -169,8 +172,24 @@ def float_step(task: FloatTask) -> FloatStep:
     block = FloatBlock.of(normal.jtj, -normal.jtr, NODE * f.problem.n_nodes, BANDWIDTH, f.n_own, task.columns)
     if not task.refit:
         return FloatStep(block, lin.toa_residual_s, f.hyper, task.weight, task.noise)
-    hyper, weight = _refitted_noise(f, lin.toa_residual_s, task.noise, task.sigma_cap_s)
+    hyper, weight = _refitted_noise(f.hyper, lin.toa_residual_s, task.noise, task.sigma_cap_s)
     return FloatStep(block, lin.toa_residual_s, hyper, weight, task.noise)
+
+
+def refit(task: tuple[kalman.Hyper, NDArray, MultipathEM, float]) -> tuple[kalman.Hyper, NDArray, MultipathEM]:
+    """A float's hyperparameters and weights refitted to its residuals (`_refitted_noise`),
+    and its noise: `float_step`'s refit alone."""
+    hyper, residual_s, noise, sigma_cap_s = task
+    refitted, weight = _refitted_noise(hyper, residual_s, noise, sigma_cap_s)
+    return refitted, weight, noise
+
+
+def _restarted(start: ArrayFit, noise: list[MultipathEM], sigma_cap_s: float, map_floats: FloatMap) -> list[FloatStep]:
+    """The first step of a fit from `start`: the floats, unknowns and weights of its last
+    step, so its blocks and residuals (`ArrayFit.blocks`); only the refit is done again."""
+    tasks = [(f.hyper, r, em, sigma_cap_s) for f, r, em in zip(start.floats, start.toa_residual_s, noise, strict=True)]
+    refitted = map_floats(refit, tasks)  # type: ignore[arg-type]
+    return [FloatStep(b, r, *fitted) for b, r, fitted in zip(start.blocks, start.toa_residual_s, refitted, strict=True)]
 
 
 def _step_scale(d_theta: NDArray, layout: ArrayLayout) -> float:
@@ -189,17 +208,17 @@ def _step_scale(d_theta: NDArray, layout: ArrayLayout) -> float:
 
 
 def _refitted_noise(
-    f: MissionFloat, residual_s: NDArray, noise: MultipathEM, sigma_cap_s: float
+    hyper: kalman.Hyper, residual_s: NDArray, noise: MultipathEM, sigma_cap_s: float
 ) -> tuple[kalman.Hyper, NDArray]:
-    """The float's arrivals' direct-path weights (multipath by EM; none beyond `GATE_S`:
+    """A float's arrivals' direct-path weights (multipath by EM; none beyond `GATE_S`:
     an arrival so far off is not the labelled source's, or the float's track is not where
     the float was) and its TOA sd from the weighted residuals, sigma^2 = sum w r^2 / sum w,
     at most `sigma_cap_s` (a float whose weighted residuals are wider does not fit the
     array: `MissionArray.floats_fitting`)."""
-    weight = np.where(np.abs(residual_s) <= GATE_S, noise.weight_of(residual_s, f.hyper.toa_sigma_s), 0.0)
+    weight = np.where(np.abs(residual_s) <= GATE_S, noise.weight_of(residual_s, hyper.toa_sigma_s), 0.0)
     sigma = float(np.sqrt(np.sum(weight * residual_s**2) / max(np.sum(weight), 1.0)))
     sigma = float(np.clip(sigma, kalman.Hyper.LOWER[2], sigma_cap_s))
-    return dataclasses.replace(f.hyper, toa_sigma_s=sigma), weight
+    return dataclasses.replace(hyper, toa_sigma_s=sigma), weight
 
 
 def _median_offsets(layout: ArrayLayout, floats: Sequence[MissionFloat], priors: kalman.KalmanPriors) -> NDArray:
@@ -250,11 +269,14 @@ def fit_array(
     cap = SIGMA_CAP * config.model.toa_sigma_s
     for step in range(iterations + 1):
         last = step == iterations  # the covariance at the solution, no further move
-        tasks = [
-            FloatTask(f, np.concatenate([x, theta[c]]), w, c, priors, em, cap, refit=not last)
-            for f, c, x, w, em in zip(floats, columns, own, weight, noise, strict=True)
-        ]
-        steps = list(map_floats(float_step, tasks))
+        if step == 0 and start is not None and start.blocks and not last:
+            steps = _restarted(start, noise, cap, map_floats)
+        else:
+            tasks = [
+                FloatTask(f, np.concatenate([x, theta[c]]), w, c, priors, em, cap, refit=not last)
+                for f, c, x, w, em in zip(floats, columns, own, weight, noise, strict=True)
+            ]
+            steps = list(map_floats(float_step, tasks))
         residuals = [s.residual_s for s in steps]
         solution = solve_mission([s.block for s in steps], information, -information @ theta)
         if last:
@@ -265,4 +287,5 @@ def fit_array(
         floats = [dataclasses.replace(f, hyper=s.hyper) for f, s in zip(floats, steps, strict=True)]
         weight, noise = [s.weight for s in steps], [s.noise for s in steps]
     covariance, jackknife = solution.covariance(), solution.jackknife_covariance()
-    return ArrayFit(layout, floats, theta, covariance, jackknife, own, weight, residuals, array_priors, s0)
+    blocks = [s.block for s in steps]
+    return ArrayFit(layout, floats, theta, covariance, jackknife, own, weight, residuals, array_priors, s0, blocks)
