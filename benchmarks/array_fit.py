@@ -9,9 +9,9 @@ were labelled, so the tracking (17-18 minutes of it) is left out. Fits the array
 each from the floats as `rafostrack batch` reads them back (`mission.floats.mission_float`):
 with the tables as simulated (no value to release), and with three values wrong at once (an
 offset +25 s, a drift +0.035 s/day, a position 18 km east: three releases, each fitted
-again). Prints per fit the Gauss-Newton steps (each a pass over every float), wall seconds,
-seconds per float and step, the process's peak resident memory and its largest worker's,
-and the values decided.
+again). Prints per fit the Gauss-Newton steps (each a pass over every float; after a
+release the first only refits the weights), wall seconds, seconds per float and step, the
+process's peak resident memory, and the values decided.
 
     python benchmarks/array_fit.py [--floats 140] [--seed 2026] [--jobs 1]
 
@@ -54,10 +54,10 @@ def faulted(beacons: BeaconTable) -> BeaconTable:
     return dataclasses.replace(beacons, offset_s=offset, drift_s_per_day=drift, lat=lat, lon=lon)
 
 
-def peak_mb(who: int = resource.RUSAGE_SELF) -> float:
-    """Peak resident memory so far (MB) of this process, or of its largest finished child
-    (`resource.RUSAGE_CHILDREN`: the worker processes, once their pool is closed)."""
-    return resource.getrusage(who).ru_maxrss / 1024
+def peak_mb() -> float:
+    """This process's peak resident memory so far (MB): the fit's, where the floats, their
+    blocks and the array system are held (a worker holds one float's work at a time)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def _built(simulated: SimulatedFloat, beacons: BeaconTable) -> MissionFloat | None:
@@ -89,8 +89,7 @@ def fit_once(label: str, simulated: list[SimulatedFloat], beacons: BeaconTable, 
     arrivals = sum(f.n_arrivals for f in floats)
     print(
         f"{label:>9} {len(floats):6d} {arrivals:9d} {built:7.1f} {steps:5d} {seconds:8.1f} "
-        f"{1000 * seconds / max(steps * len(floats), 1):9.1f} {peak_mb():8.0f} {peak_mb(resource.RUSAGE_CHILDREN):9.0f}"
-        f"  {decided}",
+        f"{1000 * seconds / max(steps * len(floats), 1):9.1f} {peak_mb():8.0f}  {decided}",
         flush=True,
     )
 
@@ -112,7 +111,7 @@ def main() -> None:
         f"simulated in {time.perf_counter() - started:.0f} s; the fit's per-float work on {args.jobs} process(es)"
     )
     print(f"{'tables':>9} {'floats':>6} {'arrivals':>9} {'build s':>7} {'steps':>5} {'fit s':>8} "
-          f"{'ms/float':>9} {'peak MB':>8} {'worker MB':>9}  decided")  # fmt: skip
+          f"{'ms/float':>9} {'peak MB':>8}  decided")  # fmt: skip
     # numba's kernels compiled first, as a batch's tracking has compiled them before its fit
     calibrated_array([f for s in simulated.floats[:2] if (f := _built(s, beacons)) is not None], beacons, load_config())
     fit_once("as given", simulated.floats, beacons, args.jobs)
