@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -160,7 +161,8 @@ class FloatStep:
     noise: MultipathEM
 
 
-FloatMap = Callable[[Callable[[FloatTask], FloatStep], Iterable[FloatTask]], Iterable[FloatStep]]
+# How the floats' work is mapped, in order: builtin map, or over worker processes (`float_step`, `refit`).
+FloatMap = Callable[[Callable[[Any], Any], Iterable[Any]], Iterable[Any]]
 
 
 def float_step(task: FloatTask) -> FloatStep:
@@ -188,7 +190,7 @@ def _restarted(start: ArrayFit, noise: list[MultipathEM], sigma_cap_s: float, ma
     """The first step of a fit from `start`: the floats, unknowns and weights of its last
     step, so its blocks and residuals (`ArrayFit.blocks`); only the refit is done again."""
     tasks = [(f.hyper, r, em, sigma_cap_s) for f, r, em in zip(start.floats, start.toa_residual_s, noise, strict=True)]
-    refitted = map_floats(refit, tasks)  # type: ignore[arg-type]
+    refitted = map_floats(refit, tasks)
     return [FloatStep(b, r, *fitted) for b, r, fitted in zip(start.blocks, start.toa_residual_s, refitted, strict=True)]
 
 

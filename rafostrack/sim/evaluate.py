@@ -108,7 +108,7 @@ def truth_estimate(sim: SimulatedFloat) -> Estimate:
         [
             (w.time, j + 1, t, b, 1.0 if b is not None else 0.0)
             for w in sim.record.windows
-            for j, (t, b) in enumerate(zip(w.toa_s, w.beacon_id, strict=True))
+            for j, (t, b) in enumerate(zip(w.toa_s, w.beacon_id or (None,) * w.n_signals, strict=True))
         ],
         columns=["time", "rank", "toa_s", "beacon_id", "prob"],
     )
