@@ -38,7 +38,8 @@ def array_rows(array: MissionArray, in_table: set[tuple[str, str]] | None = None
     """`array.csv`'s rows: per source and field, given, estimated (the arrivals' value), sd,
     unit, outcome, whether the calibrated table holds a value other than the given one
     (`in_table`, by (source, field); by default the decided ones), floats and arrivals."""
-    decided = {(v.check.id, v.check.field) for v in array.decided()} if in_table is None else in_table
+    if in_table is None:
+        in_table = {(v.check.id, v.check.field) for v in array.decided()}
     rows = []
     for v in array.values:
         c = v.check
@@ -52,7 +53,7 @@ def array_rows(array: MissionArray, in_table: set[tuple[str, str]] | None = None
                 "sd": "" if c.sd is None else c.sd,
                 "unit": "lat lon" if c.field == "position" else c.unit,
                 "outcome": c.outcome,
-                "calibrated": (c.id, c.field) in decided,
+                "calibrated": (c.id, c.field) in in_table,
                 "floats": v.floats,
                 "arrivals": round(v.arrivals, 1),
                 "line": "" if c.line is None else c.line,
