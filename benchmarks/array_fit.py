@@ -31,7 +31,7 @@ import numpy as np
 from archive import SEED, dimes_archive_floats
 
 from rafostrack.batch.pool import ordered_map
-from rafostrack.config import load_config
+from rafostrack.config import Config, load_config
 from rafostrack.domain import BeaconTable
 from rafostrack.mission.array import calibrated_array
 from rafostrack.mission.floats import MissionFloat, mission_float
@@ -60,16 +60,15 @@ def peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _built(simulated: SimulatedFloat, beacons: BeaconTable) -> MissionFloat | None:
+def _built(simulated: SimulatedFloat, beacons: BeaconTable, config: Config) -> MissionFloat | None:
     """The float as the fit reads it back from its outputs, its truth as its track and labels."""
-    return mission_float(simulated.info.float_id, truth_estimate(simulated), beacons, simulated.info, load_config())
+    return mission_float(simulated.info.float_id, truth_estimate(simulated), beacons, simulated.info, config)
 
 
-def fit_once(label: str, simulated: list[SimulatedFloat], beacons: BeaconTable, jobs: int) -> None:
+def fit_once(label: str, simulated: list[SimulatedFloat], beacons: BeaconTable, config: Config, jobs: int) -> None:
     """Build the mission's floats against `beacons`, fit the array and print one line."""
-    config = load_config()
     started = time.perf_counter()
-    floats = [f for s in simulated if (f := _built(s, beacons)) is not None]
+    floats = [f for s in simulated if (f := _built(s, beacons, config)) is not None]
     built = time.perf_counter() - started
     steps = 0
 
@@ -102,9 +101,10 @@ def main() -> None:
     args = parser.parse_args()
 
     started = time.perf_counter()
-    beacons = dimes_scenario()[0]
-    model = load_config().model
-    simulated = simulate_mission(beacons, dimes_archive_floats(args.floats), model, np.random.default_rng(args.seed))
+    beacons, config = dimes_scenario()[0], load_config()
+    simulated = simulate_mission(
+        beacons, dimes_archive_floats(args.floats), config.model, np.random.default_rng(args.seed)
+    )
     days = np.mean([(s.info.end_time - s.info.launch_time) / np.timedelta64(1, "D") for s in simulated.floats])
     print(
         f"archive: {len(simulated.floats)} DIMES floats of {days:.0f} days on average, {len(beacons)} sources, "
@@ -113,9 +113,10 @@ def main() -> None:
     print(f"{'tables':>9} {'floats':>6} {'arrivals':>9} {'build s':>7} {'steps':>5} {'fit s':>8} "
           f"{'ms/float':>9} {'peak MB':>8}  decided")  # fmt: skip
     # numba's kernels compiled first, as a batch's tracking has compiled them before its fit
-    calibrated_array([f for s in simulated.floats[:2] if (f := _built(s, beacons)) is not None], beacons, load_config())
-    fit_once("as given", simulated.floats, beacons, args.jobs)
-    fit_once("3 wrong", simulated.floats, faulted(beacons), args.jobs)
+    warm_up = [f for s in simulated.floats[:2] if (f := _built(s, beacons, config)) is not None]
+    calibrated_array(warm_up, beacons, config)
+    fit_once("as given", simulated.floats, beacons, config, args.jobs)
+    fit_once("3 wrong", simulated.floats, faulted(beacons), config, args.jobs)
 
 
 if __name__ == "__main__":
