@@ -52,12 +52,14 @@ def test_the_mission_decides_the_wrong_offsets_tracks_with_them_and_a_rerun_trac
     result = _batch(root, out)
     assert result.exit_code == 0, result.output
     rows = {(r["source"], r["field"]): r for r in csv.DictReader((out / "m" / "array.csv").open())}
-    decided = {key for key, r in rows.items() if r["calibrated"] == "True"}
+    decided = {key for key, r in rows.items() if r["calibrated"]}
     assert decided == {(b, "offset_s") for b in WRONG}
     for source in WRONG:
-        row = rows[source, "offset_s"]
-        assert row["outcome"] == "contradicted"
+        row, clock = rows[source, "offset_s"], rows[source, "clock_s"]
+        assert row["outcome"] == clock["outcome"] == "contradicted"
         assert abs(float(row["estimated"]) - truth[source]) < 2 * float(row["sd"])
+        # The sources' drifts are 0: the offset written is the clock over the mission.
+        assert abs(float(row["calibrated"]) - truth[source]) < 2 * float(clock["sd"])
     calibrated = {r["beacon_id"]: r for r in csv.DictReader((out / "m" / "beacons-calibrated.csv").open())}
     given = {r["beacon_id"]: r for r in csv.DictReader((root / "m" / "beacons.csv").open())}
     assert {b for b in given if given[b] != calibrated[b]} == set(WRONG)
@@ -65,7 +67,8 @@ def test_the_mission_decides_the_wrong_offsets_tracks_with_them_and_a_rerun_trac
         run = json.loads((float_dir / "run.json").read_text())
         assert Path(run["inputs"]["beacons"]["path"]).name == "beacons-calibrated.csv"
     record = json.loads((out / "m" / "array.json").read_text())
-    assert record["rounds"][-1]["settled"] and record["decided"] == sorted(f"{b} offset_s" for b in WRONG)
+    assert record["rounds"][-1]["settled"]
+    assert sorted(record["decided"]) == sorted(f"{b} {field}" for b in WRONG for field in ("clock_s", "offset_s"))
     again = _batch(root, out)
     assert again.exit_code == 0 and "0 processed, 3 skipped" in again.output, again.output
 

@@ -20,7 +20,7 @@ from rafostrack.mission.array import calibrated_array, released_in
 from rafostrack.mission.array_checks import array_values
 from rafostrack.mission.array_fit import ArrayLayout, ArrayPriors
 from rafostrack.mission.floats import BANDWIDTH, mission_float, referred
-from rafostrack.mission.outputs import ARRAY_NAME, CALIBRATED_NAME, write_array_outputs
+from rafostrack.mission.outputs import ARRAY_NAME, CALIBRATED_NAME, array_rows, write_array_outputs
 from rafostrack.mission.schur import FloatBlock, solve_mission
 from rafostrack.model.geodesy import displace
 from rafostrack.sim.evaluate import truth_estimate
@@ -160,12 +160,18 @@ def _faulted(beacons):
     )
 
 
+def _clock_at_mid(table, array, row: int) -> float:
+    """A table's clock of the source in `row` at the mission's mean time of its arrivals."""
+    g = int(np.searchsorted(array.fit.layout.sources, row))
+    return float(table.offset_s[row] + table.drift_s_per_day[row] * array.fit.layout.mid_days[g])
+
+
 def test_a_mission_names_several_faults_at_once_and_recovers_them_within_two_sd(mission):
     beacons, simulated = mission
     faulted = _faulted(beacons)
     array = calibrated_array(_floats(faulted, simulated), faulted, CONFIG)
     by_value = {(v.check.id, v.check.field): v.check for v in array.values}
-    wrong = {("B2", "offset_s"), ("B5", "drift_s_per_day"), ("B7", "position")}
+    wrong = {("B2", "offset_s"), ("B2", "clock_s"), ("B5", "drift_s_per_day"), ("B7", "position")}
     assert {key for key, c in by_value.items() if c.outcome == CONTRADICTED} == wrong
     assert {(v.check.id, v.check.field) for v in array.decided()} == wrong
     offset, drift = by_value["B2", "offset_s"], by_value["B5", "drift_s_per_day"]
@@ -178,10 +184,49 @@ def test_a_mission_names_several_faults_at_once_and_recovers_them_within_two_sd(
     )
     assert np.hypot(north, east) < 2 * position.sd
     table = array.calibrated_beacons()
-    np.testing.assert_array_equal(
-        table.offset_s[[0, *range(2, N_BEACONS)]], faulted.offset_s[[0, *range(2, N_BEACONS)]]
+    untouched = [0, 2, 3, 5, 6, 7]
+    np.testing.assert_array_equal(table.offset_s[untouched], faulted.offset_s[untouched])
+    assert table.drift_s_per_day[4] == drift.supported
+    # The offsets written put each clock over the mission at the arrivals' value.
+    clock = by_value["B2", "clock_s"]
+    assert _clock_at_mid(table, array, 1) == pytest.approx(clock.supported, abs=1e-9)
+    assert abs(clock.supported - _clock_at_mid(beacons, array, 1)) < 2 * clock.sd
+    assert _clock_at_mid(table, array, 4) == pytest.approx(by_value["B5", "clock_s"].supported, abs=1e-9)
+
+
+def test_where_the_mission_cannot_split_a_clock_error_it_puts_the_clock_right(mission):
+    """The sources' start (their clocks' epoch) 700 days before a 90-day mission: a drift
+    0.01 s/day off (B2: its clock 7 s off, the drift not decidable), the same with an offset
+    20 s off (B4), an offset 20 s off alone (B6). Each clock over the mission is contradicted
+    and no drift is; the table written keeps the drifts and puts each clock within 2 sd of
+    the truth's (the true drifts are 0: the simulated floats are the same)."""
+    beacons, simulated = mission
+    start = min(s.info.launch_time for s in simulated) - np.timedelta64(700, "D")
+    true = dataclasses.replace(beacons, start=np.full(N_BEACONS, start))
+    wrong_drift, wrong_offset = np.eye(N_BEACONS)[[1, 3]].sum(0), np.eye(N_BEACONS)[[3, 5]].sum(0)
+    faulted = dataclasses.replace(
+        true, drift_s_per_day=true.drift_s_per_day + 0.01 * wrong_drift, offset_s=true.offset_s + 20.0 * wrong_offset
     )
-    assert table.offset_s[1] == offset.supported
+    array = calibrated_array(_floats(faulted, simulated), faulted, CONFIG)
+    contradicted = {(v.check.id, v.check.field) for v in array.values if v.check.outcome == CONTRADICTED}
+    assert contradicted - {("B4", "offset_s"), ("B6", "offset_s")} == {
+        ("B2", "clock_s"),
+        ("B4", "clock_s"),
+        ("B6", "clock_s"),
+    }
+    table = array.calibrated_beacons()
+    np.testing.assert_array_equal(table.drift_s_per_day, faulted.drift_s_per_day)
+    clocks = {v.check.id: v.check for v in array.values if v.check.field == "clock_s"}
+    for row in (1, 3, 5):
+        clock = clocks[f"B{row + 1}"]
+        assert _clock_at_mid(table, array, row) == pytest.approx(clock.supported, abs=1e-9)
+        assert abs(clock.supported - _clock_at_mid(true, array, row)) < 2 * clock.sd
+    assert np.flatnonzero(table.offset_s != faulted.offset_s).tolist() == [1, 3, 5]
+    rows = {(r["source"], r["field"]): r for r in array_rows(array)}
+    assert rows["B2", "offset_s"]["outcome"] != CONTRADICTED
+    assert rows["B2", "offset_s"]["calibrated"] == f"{table.offset_s[1]:.3f}"
+    mid = np.timedelta64(round(float(array.fit.layout.mid_days[1]) * 1440), "m")
+    assert rows["B2", "clock_s"]["at"] == str((start + mid).astype("datetime64[m]"))
 
 
 def test_the_mission_judges_its_values_at_its_own_z_score(mission):
@@ -214,12 +259,13 @@ def test_the_values_the_floats_were_tracked_with_start_released(mission, tmp_pat
     layout = first.fit.layout
     assert not released_in(layout, faulted, faulted).any()
     released = released_in(layout, faulted, table)
+    # B5's offset moved with its drift, its clock over the mission kept at the arrivals'.
     assert {(int(layout.sources[g]), b) for g, b in zip(*np.nonzero(released), strict=True)} == {
-        (1, 0), (4, 1), (6, 3), (6, 4)
+        (1, 0), (4, 0), (4, 1), (6, 3), (6, 4)
     }  # fmt: skip
     later = calibrated_array(_floats(faulted, simulated), faulted, CONFIG, tracked_with=table)
     assert {(v.check.id, v.check.field) for v in later.decided()} == {
-        ("B2", "offset_s"), ("B5", "drift_s_per_day"), ("B7", "position")
+        ("B2", "offset_s"), ("B2", "clock_s"), ("B5", "drift_s_per_day"), ("B7", "position")
     }  # fmt: skip
     offset = next(v.check for v in later.values if (v.check.id, v.check.field) == ("B2", "offset_s"))
     assert abs(offset.supported - beacons.offset_s[1]) < 2 * offset.sd
@@ -232,9 +278,12 @@ def test_the_values_the_floats_were_tracked_with_start_released(mission, tmp_pat
     write_array_outputs(nothing, tmp_path, given, plots=False, kept=table)
     assert (tmp_path / CALIBRATED_NAME).read_text() == "kept\n"
     rows = list(csv.DictReader((tmp_path / ARRAY_NAME).open()))
-    assert {(r["source"], r["field"]) for r in rows if r["calibrated"] == "True"} == {
-        ("B2", "offset_s"), ("B5", "drift_s_per_day"), ("B7", "position")
-    }  # fmt: skip
+    assert {(r["source"], r["field"]): r["calibrated"] for r in rows if r["calibrated"]} == {
+        ("B2", "offset_s"): f"{table.offset_s[1]:.3f}",
+        ("B5", "offset_s"): f"{table.offset_s[4]:.3f}",
+        ("B5", "drift_s_per_day"): f"{table.drift_s_per_day[4]:.5f}",
+        ("B7", "position"): f"{table.lat[6]:.4f} {table.lon[6]:.4f}",
+    }
     write_array_outputs(nothing, tmp_path, given, plots=False)
     assert not (tmp_path / CALIBRATED_NAME).exists()
 

@@ -21,12 +21,14 @@ from rafostrack.batch.overview import OVERVIEW_HTML, summarise_tree, write_overv
 from rafostrack.cli import main
 from rafostrack.mission.outputs import ARRAY_COLUMNS
 
-HEADER = "source,field,given,estimated,shift,sd,unit,outcome,calibrated,floats,arrivals,line"
-CONTRADICTED = "B1,offset_s,300.0,902.396,,1.536,s,contradicted,True,9,716.4,2"
-UNDETERMINED = "B2,position,-58.1010 -97.9600,-58.1305 -98.0192,4.79,3.5,lat lon,undetermined,False,3,80.2,3"
+HEADER = "source,field,given,estimated,shift,sd,unit,at,outcome,calibrated,floats,arrivals,line"
+CONTRADICTED = "B1,offset_s,300.0,902.396,,1.536,s,,contradicted,902.396,9,716.4,2"
+UNDETERMINED = "B2,position,-58.1010 -97.9600,-58.1305 -98.0192,4.79,3.5,lat lon,,undetermined,,3,80.2,3"
+# A source's clock over the mission: contradicted, but no table cell (its offset is).
+CLOCK = "B1,clock_s,300.0,902.396,,0.815,s,2009-06-01T12:00,contradicted,,9,716.4,2"
 CONSISTENT = [
-    "B1,drift_s_per_day,0.0,-0.00143,,0.00315,s/day,consistent,False,9,716.4,2",
-    "B2,offset_s,900.0,899.58,,0.352,s,consistent,False,3,80.2,3",
+    "B1,drift_s_per_day,0.0,-0.00143,,0.00315,s/day,,consistent,,9,716.4,2",
+    "B2,offset_s,900.0,899.58,,0.352,s,,consistent,,3,80.2,3",
 ]
 CALIBRATED = "beacon_id,lat,lon,offset_s,drift_s_per_day\nB1,-55.996,-109.9102,902.396,0\nB2,-58.101,-97.96,900,0\n"
 ROUNDS = [
@@ -71,7 +73,7 @@ def _text(fragment: str) -> str:
 
 def test_a_contradicted_value_is_shown_with_its_estimate_and_the_files_are_linked(tmp_path):
     assert HEADER.split(",") == list(ARRAY_COLUMNS)  # the rows here are array.csv's as written
-    out = _tree(tmp_path / "out", [CONTRADICTED, UNDETERMINED, *CONSISTENT], calibrated=CALIBRATED)
+    out = _tree(tmp_path / "out", [CONTRADICTED, UNDETERMINED, CLOCK, *CONSISTENT], calibrated=CALIBRATED)
     (out / "m" / "array.png").write_bytes(b"\x89PNG not really")
     page = _page(out)
     section = _section(page)
@@ -81,8 +83,9 @@ def test_a_contradicted_value_is_shown_with_its_estimate_and_the_files_are_linke
     assert cells[1] == ["B1", "offset_s", "300.0", "902.396", "1.536", "s", "contradicted", "9", "716.4"]
     assert cells[2][:2] == ["B2", "position"] and cells[2][3] == "-58.1305 -98.0192 (4.79 km away)"
     assert cells[2][4] == "3.5 km" and cells[2][6] == "undetermined"
-    assert len(rows) == 3  # the consistent values are only counted
-    assert "2 of 4 values not consistent with the arrivals" in _text(section)
+    assert cells[3][:2] == ["B1", "clock_s"] and cells[3][6] == "contradicted"
+    assert len(rows) == 4  # the consistent values are only counted
+    assert "3 of 5 values not consistent with the arrivals" in _text(section)
     line = _text(section.split("<p>")[1])
     assert line.startswith("2 rounds; in the last, 12 floats fit the array, their weighted rms residual 1.23 s")
     assert "decided in beacons-calibrated.csv: B1 offset_s 300.0 → 902.396 s; settled" in line
@@ -108,7 +111,8 @@ def test_a_decided_value_is_shown_as_the_calibrated_table_holds_it(tmp_path):
     the table's value (not the last round's estimate) and says the array did not settle."""
     rounds = [{**ROUNDS[0], "round": k} for k in (1, 2, 3)]  # none settled
     table = CALIBRATED.replace("902.396", "899.865")
-    section = _section(_page(_tree(tmp_path / "out", [CONTRADICTED, *CONSISTENT], rounds, table)))
+    kept = CONTRADICTED.replace(",902.396,9,", ",899.865,9,")  # array.csv's `calibrated`: the kept table's
+    section = _section(_page(_tree(tmp_path / "out", [kept, *CONSISTENT], rounds, table)))
     assert "B1 offset_s 300.0 → 899.865 s" in _text(section)
     assert "not settled after 3 rounds: the floats keep the table of the round before" in _text(section)
 
@@ -151,7 +155,7 @@ def test_an_unreadable_array_json_leaves_the_values_shown(tmp_path):
     (out / "m" / "array.json").write_text("{not json")
     section = _section(_page(out))
     assert "array.json cannot be read: Expecting property name" in _text(section)
-    decided = "decided in beacons-calibrated.csv: B1 offset_s 300.0 → 902.396 (the fit's estimate) s"
+    decided = "decided in beacons-calibrated.csv: B1 offset_s 300.0 → 902.396 s"
     assert f"rounds not known: {decided}" in _text(section)
     assert ">902.396<" in section
 

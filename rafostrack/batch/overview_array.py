@@ -1,7 +1,7 @@
 """The mission overview's array section: what each mission's array fit left in OUT/<mission>.
 
 The array fit (`array_rounds.py`, `mission/outputs.py`) writes `array.csv` (per source and
-field: given, estimated, sd, outcome, whether the calibrated table changed it), `array.json`
+field: given, estimated, sd, outcome, the value the calibrated table holds where it changed it), `array.json`
 (its rounds), `array.png` and, when it decided a value, `beacons-calibrated.csv`. Read back
 here, each file's failure kept as one line of text (never raised); a mission without
 array.csv has no section. A section: one line (the rounds, what was decided, linked to the
@@ -42,8 +42,8 @@ class ArraySection:
 
     @property
     def decided(self) -> list[dict[str, str]]:
-        """The values the calibrated table changed (array.csv's `calibrated`)."""
-        return [v for v in self.values or () if v["calibrated"].lower() == "true"]
+        """The values the calibrated table changed (array.csv's `calibrated`: the value it holds)."""
+        return [v for v in self.values or () if v["calibrated"]]
 
     @property
     def not_consistent(self) -> list[dict[str, str]]:
@@ -173,12 +173,8 @@ def _decided_html(section: ArraySection) -> str:
 
 
 def _change_text(section: ArraySection, value: dict[str, str]) -> str:
-    """'US1-1 drift_s_per_day 0.0396 → 0.01573 s/day': given, then as the calibrated table holds it
-    (else the fit's estimate, said so)."""
-    cells = (section.table or {}).get(value["source"], {})
-    wanted = ("lat", "lon") if value["field"] == "position" else (value["field"],)
-    held = " ".join(cells.get(name, "") for name in wanted).strip() or f"{value['estimated']} (the fit's estimate)"
-    return f"{value['source']} {value['field']} {value['given']} → {held} {value['unit']}"
+    """'US1-1 drift_s_per_day 0.0396 → 0.01573 s/day': given, then as the calibrated table holds it."""
+    return f"{value['source']} {value['field']} {value['given']} → {value['calibrated']} {value['unit']}"
 
 
 def _settled_text(rounds: Sequence[dict[str, Any]]) -> str:

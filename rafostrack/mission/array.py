@@ -17,6 +17,15 @@ start released (`released_in`). Their tracks and labels fit those values, not th
 held at the table's under its tight prior, such a value is judged by extrapolating the
 linearised fit from the wrong side (a position 38 km off, corrected in the tracking, was
 estimated at 12, then at 103-125 km, as the other releases went by).
+
+A source's timing is written as its clock over the mission (`array_checks.clock_check`):
+where its offset, drift or clock is decided, the calibrated table's offset is the one that
+puts the clock at the arrivals' value at their mean time, with the drift decided or as
+given. The offset at the epoch (a - d mid) is what the arrivals judge, but written as such
+with a drift they cannot decide it leaves the clock off over the mission by that drift's
+error times the days since the epoch (12 s on a held-out mission, `docs/decisions.md`);
+where neither the offset nor the drift is decided, a contradicted clock still is, and the
+arrivals say how the clock is wrong over the mission, not how the error splits.
 """
 
 from __future__ import annotations
@@ -33,10 +42,11 @@ from ..calibrate.metadata_checks import CONTRADICTED, UNDETERMINED, MetadataChec
 from ..config import Config
 from ..domain import BeaconTable
 from ..model.geodesy import local_offsets_km
-from .array_checks import RELEASES, ArrayValue, array_values, strongest_contradiction
+from .array_checks import CLOCK, RELEASES, TIMING, ArrayValue, array_values, strongest_contradiction
 from .array_fit import SOURCE_BLOCKS, ArrayFit, ArrayLayout, FloatMap, fit_array
 from .floats import MissionFloat
 
+TABLE_FIELDS = ("offset_s", "drift_s_per_day", "position")  # the table's values a mission decides
 MAX_RELEASES = 12
 RELEASE_ITERATIONS = 3  # Gauss-Newton steps after a release, from the previous fit
 TRUSTED_RMS = 3.0
@@ -97,31 +107,63 @@ class MissionArray:
         ]
 
     def calibrated_beacons(self) -> BeaconTable:
-        """The table as given with only the decided values replaced by the mission's."""
+        """The table as given with only the decided values replaced by the mission's: a
+        position moved; where a source's offset, drift or clock is decided, its clock over
+        the mission put at the arrivals' value, with its drift theirs where that is decided
+        and as given otherwise (module docstring)."""
         offset, drift = self.beacons.offset_s.copy(), self.beacons.drift_s_per_day.copy()
         lat, lon = self.beacons.lat.copy(), self.beacons.lon.copy()
-        for value in self.decided():
-            row, check = int(self.fit.layout.sources[value.source]), value.check
-            if check.field == "offset_s":
-                offset[row] = float(check.supported)  # type: ignore[arg-type]
-            elif check.field == "drift_s_per_day":
-                drift[row] = float(check.supported)  # type: ignore[arg-type]
-            elif check.supported_lat_lon is not None:
-                lat[row], lon[row] = check.supported_lat_lon
+        decided = self._decided_by_source()
+        for g, fields in decided.items():
+            row = int(self.fit.layout.sources[g])
+            if "drift_s_per_day" in fields:
+                drift[row] = float(fields["drift_s_per_day"].supported)  # type: ignore[arg-type]
+            if any(field in fields for field in TIMING):
+                clock = float(self._clock(g).supported)  # type: ignore[arg-type]
+                offset[row] = clock - drift[row] * float(self.fit.layout.mid_days[g])
+            position = fields.get("position")
+            if position is not None and position.supported_lat_lon is not None:
+                lat[row], lon[row] = position.supported_lat_lon
         return dataclasses.replace(self.beacons, offset_s=offset, drift_s_per_day=drift, lat=lat, lon=lon)
+
+    def _decided_by_source(self) -> dict[int, dict[str, MetadataCheck]]:
+        """The decided values' checks by source (position in the array's) and field."""
+        found: dict[int, dict[str, MetadataCheck]] = {}
+        for v in self.decided():
+            found.setdefault(v.source, {})[v.check.field] = v.check
+        return found
+
+    def _clock(self, source: int) -> MetadataCheck:
+        """The source's `clock_s` check."""
+        return next(v.check for v in self.values if v.source == source and v.check.field == CLOCK)
+
+    def _settling_tolerances(self) -> dict[str, NDArray[np.float64]]:
+        """Per table field (`TABLE_FIELDS`) and row, how far a table's value may lie from the
+        calibrated one for the mission to be settled: half the sd of what decided it (an
+        offset set by the clock moves with the clock and, where the drift is decided, the
+        drift times the days to the mission), 0 where nothing was decided."""
+        tolerance = {field: np.zeros(len(self.beacons)) for field in TABLE_FIELDS}
+        for g, fields in self._decided_by_source().items():
+            row = int(self.fit.layout.sources[g])
+            rate = fields.get("drift_s_per_day")
+            if rate is not None:
+                tolerance["drift_s_per_day"][row] = 0.5 * float(rate.sd or 0.0)
+            if any(field in fields for field in TIMING):
+                drift_sd = 0.0 if rate is None else float(rate.sd or 0.0)
+                mid = abs(float(self.fit.layout.mid_days[g]))
+                tolerance["offset_s"][row] = 0.5 * (float(self._clock(g).sd or 0.0) + mid * drift_sd)
+            if "position" in fields:
+                tolerance["position"][row] = 0.5 * float(fields["position"].sd or 0.0)
+        return tolerance
 
     def settled_in(self, table: BeaconTable) -> bool:
         """Whether `table` (the one the floats were tracked with) already holds what the
-        mission decides: each decided value within half its sd, every other as given."""
+        mission decides: each decided value within half its sd (`_settling_tolerances`),
+        every other as given."""
         ours = self.calibrated_beacons()
-        tolerance = {"offset_s": 0.0, "drift_s_per_day": 0.0, "position": 0.0}
-        close = np.ones(len(ours), dtype=bool)
-        for v in self.decided():
-            row = int(self.fit.layout.sources[v.source])
-            tolerance[v.check.field] = 0.5 * float(v.check.sd or 0.0)
-            close[row] = False
         if len(table) != len(ours) or not np.array_equal(table.beacon_id, ours.beacon_id):
             return False
+        tolerance = self._settling_tolerances()
         km = local_distance_km(table.lat, table.lon, ours.lat, ours.lon)
         return bool(
             np.all(np.abs(table.offset_s - ours.offset_s) <= tolerance["offset_s"] + 1e-9)
@@ -139,10 +181,10 @@ def array_priors(config: Config) -> kalman.KalmanPriors:
 
 
 def changed_values(beacons: BeaconTable, table: BeaconTable) -> dict[str, NDArray[np.bool_]]:
-    """Per field of `RELEASES`, the rows where `table` (made from `beacons`, with some cells
+    """Per table field (offset, drift, position), the rows where `table` (made from `beacons`, with some cells
     changed) holds another value than `beacons`; none where its sources are not the same."""
     if not np.array_equal(table.beacon_id, beacons.beacon_id):
-        return {field: np.zeros(len(beacons), dtype=bool) for field in RELEASES}
+        return {field: np.zeros(len(beacons), dtype=bool) for field in TABLE_FIELDS}
     return {
         "offset_s": table.offset_s != beacons.offset_s,
         "drift_s_per_day": table.drift_s_per_day != beacons.drift_s_per_day,

@@ -9,8 +9,10 @@ arrivals' own estimate (`data_only`), judged by the same rule (`outcome_of`: con
 beyond `[checks] mission_z_score` sds and the value's tolerance; consistent within it; else
 undetermined), its sd widened to the floats' jackknife spread where that is wider
 (`widening`). Per source, the offset at the table's epoch (o = a - d mid) and the drift
-from the joint estimate of (a, d); the position from that of (east, north, a, d), judged
-along the displacement (a displacement along every float's bearing is an offset: only
+from the joint estimate of (a, d), and its clock over the mission (`clock_check`: a alone,
+the correction at the arrivals' mean time, where it is nearly uncorrelated with d: decided
+even where the mission cannot split it between offset and drift); the position from that of
+(east, north, a, d), judged along the displacement (a displacement along every float's bearing is an offset: only
 floats heard from several bearings decide it). A source heard on fewer than
 `MIN_SOURCE_ARRIVALS` weighted arrivals in all is not judged.
 """
@@ -30,6 +32,7 @@ from ..calibrate.metadata_checks import (
     MetadataCheck,
     beacon_source,
     data_only,
+    outcome_of,
     shift_check,
     source_timing_checks,
     z_of,
@@ -38,13 +41,15 @@ from ..config import ChecksConfig
 from ..domain import BeaconTable
 from .array_fit import ArrayFit
 
+CLOCK = "clock_s"  # a source's clock over the mission (`clock_check`): not a table column
+TIMING = ("offset_s", "drift_s_per_day", CLOCK)
 # The theta blocks (`array_fit.SOURCE_BLOCKS`) a field's release frees.
-RELEASES = {"offset_s": (0,), "drift_s_per_day": (1,), "position": (3, 4)}
+RELEASES = {"offset_s": (0,), "drift_s_per_day": (1,), CLOCK: (0,), "position": (3, 4)}
 # Corrections beyond these are no estimate: the linearised model does not reach so far (a
 # source's range is linear in its displacement d only while d^2 / 2R stays small: 5 km at
 # 1000 km for d = 100 km), or the floats' labels were not the source's. Such a value is
 # undetermined, never written into the calibrated table.
-PLAUSIBLE = {"offset_s": 1000.0, "drift_s_per_day": 0.2, "position": 100.0}
+PLAUSIBLE = {"offset_s": 1000.0, "drift_s_per_day": 0.2, CLOCK: 1000.0, "position": 100.0}
 
 
 @dataclass(frozen=True)
@@ -101,8 +106,27 @@ def plausible(check: MetadataCheck) -> MetadataCheck:
     return dataclasses.replace(check, outcome=UNDETERMINED, note="beyond what the linearised fit can estimate")
 
 
+def clock_check(
+    beacons: BeaconTable, row: int, arrivals: tuple[NDArray, NDArray] | None, mid_day: float, checks: ChecksConfig
+) -> MetadataCheck:
+    """A source's clock over the mission: the table's offset + drift mid at the arrivals'
+    mean time (`mid_day` days after its epoch) against the arrivals' estimate there, a of
+    their joint estimate `arrivals` of (a, d) (undetermined without a value when None).
+
+    At the mean time a and d are nearly uncorrelated: one mission-year of arrivals decides a
+    source's clock to a second where its offset at the epoch (a - d mid) is uncertain by
+    tens, the drift's uncertainty times the years since the epoch."""
+    file, line, name = beacon_source(beacons, row)
+    given = round(float(beacons.offset_s[row] + beacons.drift_s_per_day[row] * mid_day), 3)
+    if arrivals is None:
+        return MetadataCheck(file, line, name, CLOCK, given, None, None, "s", UNDETERMINED)
+    correction, sd = float(arrivals[0][0]), float(np.sqrt(arrivals[1][0, 0]))
+    outcome = outcome_of(correction, sd, checks.offset_tolerance_s, checks.z_score)
+    return MetadataCheck(file, line, name, CLOCK, given, round(given + correction, 3), round(sd, 3), "s", outcome)
+
+
 def array_values(fit: ArrayFit, beacons: BeaconTable, checks: ChecksConfig, widen: bool = True) -> list[ArrayValue]:
-    """Every source's offset, drift and position judged on the mission (module docstring),
+    """Every source's offset, drift, clock and position judged on the mission (module docstring),
     undetermined beyond `PLAUSIBLE`; `widen=False` judges by the arrivals' noise alone, as
     if every arrival were independent."""
     floats, arrivals = support(fit)
@@ -111,7 +135,9 @@ def array_values(fit: ArrayFit, beacons: BeaconTable, checks: ChecksConfig, wide
     for g, row in enumerate(fit.layout.sources):
         judged = arrivals[g] >= MIN_SOURCE_ARRIVALS
         timing_joint = _block(fit, g, (0, 1), widen) if judged else None
-        timing = source_timing_checks(beacons, int(row), timing_joint, float(fit.layout.mid_days[g]), checks)
+        mid = float(fit.layout.mid_days[g])
+        timing = [*source_timing_checks(beacons, int(row), timing_joint, mid, checks),
+                  clock_check(beacons, int(row), timing_joint, mid, checks)]  # fmt: skip
         file, line, name = beacon_source(beacons, int(row))
         given = (float(beacons.lat[row]), float(beacons.lon[row]))
         joint = _block(fit, g, (3, 4, 0, 1), widen) if judged else None

@@ -1,5 +1,6 @@
 """A mission's array fit written out: `array.csv` (per source and field: the value given, the
-mission's estimate and sd, the floats and arrivals it rests on, the outcome),
+mission's estimate and sd, the floats and arrivals it rests on, the outcome, the value the
+calibrated table holds; besides the table's values, each source's clock over the mission),
 `beacons-calibrated.csv` (the user's beacons.csv with only the decided cells changed) and
 `array.png` (`plots.array_residuals`)."""
 
@@ -11,12 +12,14 @@ from typing import Any
 import numpy as np
 
 from ..calibrate import kalman
+from ..calibrate.metadata_checks import beacon_source
 from ..domain import BeaconTable
 from ..io.atomic import write_text_atomic
 from ..io.table_text import with_cells
 from ..io.writers import csv_text
 from ..plots.array_residuals import SourcePanel, plot_array_residuals
 from .array import MissionArray, changed_values
+from .array_checks import CLOCK
 
 ARRAY_NAME = "array.csv"
 CALIBRATED_NAME = "beacons-calibrated.csv"
@@ -30,19 +33,39 @@ def _text(value: float | str | None, lat_lon: tuple[float, float] | None) -> str
     return "" if value is None else str(value)
 
 
-ARRAY_COLUMNS = ("source", "field", "given", "estimated", "shift", "sd", "unit", "outcome", "calibrated", "floats",
-                 "arrivals", "line")  # fmt: skip
+ARRAY_COLUMNS = ("source", "field", "given", "estimated", "shift", "sd", "unit", "at", "outcome", "calibrated",
+                 "floats", "arrivals", "line")  # fmt: skip
 
 
-def array_rows(array: MissionArray, in_table: set[tuple[str, str]] | None = None) -> list[dict[str, Any]]:
+def table_cells(table: BeaconTable, row: int, field: str) -> dict[str, str]:
+    """A table field's cells of one row (`array.TABLE_FIELDS`; a position is two) as the
+    calibrated table writes them."""
+    if field == "position":
+        return {"lat": f"{table.lat[row]:.{_DIGITS['lat']}f}", "lon": f"{table.lon[row]:.{_DIGITS['lon']}f}"}
+    return {field: f"{getattr(table, field)[row]:.{_DIGITS[field]}f}"}
+
+
+def _clock_time(array: MissionArray, source: int) -> str:
+    """When a source's clock is judged: its epoch plus the arrivals' mean days, to the
+    minute (UTC); '' for a source without a start (its epoch is each float's launch)."""
+    start = array.beacons.start[int(array.fit.layout.sources[source])]
+    if np.isnat(start):
+        return ""
+    minutes = np.timedelta64(round(float(array.fit.layout.mid_days[source]) * 1440.0), "m")
+    return str((start + minutes).astype("datetime64[m]"))
+
+
+def array_rows(array: MissionArray, table: BeaconTable | None = None) -> list[dict[str, Any]]:
     """`array.csv`'s rows: per source and field, given, estimated (the arrivals' value), sd,
-    unit, outcome, whether the calibrated table holds a value other than the given one
-    (`in_table`, by (source, field); by default the decided ones), floats and arrivals."""
-    if in_table is None:
-        in_table = {(v.check.id, v.check.field) for v in array.decided()}
+    unit, when a clock is judged (`at`), outcome, the value the calibrated table `table`
+    holds where it changed it (by default `MissionArray.calibrated_beacons`; the clock is no
+    column: its source's offset is), floats and arrivals."""
+    table = array.calibrated_beacons() if table is None else table
+    changed = changed_values(array.beacons, table)
     rows = []
     for v in array.values:
-        c = v.check
+        c, row = v.check, int(array.fit.layout.sources[v.source])
+        held = c.field in changed and bool(changed[c.field][row])
         rows.append(
             {
                 "source": c.id,
@@ -52,8 +75,9 @@ def array_rows(array: MissionArray, in_table: set[tuple[str, str]] | None = None
                 "shift": "" if c.field != "position" or c.supported is None else c.supported,
                 "sd": "" if c.sd is None else c.sd,
                 "unit": "lat lon" if c.field == "position" else c.unit,
+                "at": _clock_time(array, v.source) if c.field == CLOCK else "",
                 "outcome": c.outcome,
-                "calibrated": (c.id, c.field) in in_table,
+                "calibrated": " ".join(table_cells(table, row, c.field).values()) if held else "",
                 "floats": v.floats,
                 "arrivals": round(v.arrivals, 1),
                 "line": "" if c.line is None else c.line,
@@ -63,15 +87,17 @@ def array_rows(array: MissionArray, in_table: set[tuple[str, str]] | None = None
 
 
 def calibrated_text(array: MissionArray, given_text: str) -> str:
-    """The user's beacons.csv text with each decided value's cells replaced."""
+    """The user's beacons.csv text with the cells `MissionArray.calibrated_beacons` changed."""
+    table, beacons = array.calibrated_beacons(), array.beacons
     edits = []
-    for v in array.decided():
-        c = v.check
-        if c.field == "position" and c.supported_lat_lon is not None:
-            cells = {"lat": f"{c.supported_lat_lon[0]:.4f}", "lon": f"{c.supported_lat_lon[1]:.4f}"}
-        else:
-            cells = {c.field: f"{float(c.supported):.{_DIGITS[c.field]}f}"}  # type: ignore[arg-type]
-        edits.append((c.line or 0, c.id, cells))
+    for row in range(len(beacons)):
+        cells = {}
+        for field, moved in changed_values(beacons, table).items():
+            if moved[row]:
+                cells.update(table_cells(table, row, field))
+        if cells:
+            _, line, name = beacon_source(beacons, row)
+            edits.append((line or 0, name, cells))
     return with_cells(given_text, edits)
 
 
@@ -115,16 +141,15 @@ def write_array_outputs(
     `array.png` in `out_dir`, each written atomically."""
     out_dir.mkdir(parents=True, exist_ok=True)
     calibrated = out_dir / CALIBRATED_NAME
-    in_table = None
+    table = None
     if kept is not None and calibrated.is_file():
-        changed = changed_values(array.beacons, kept).items()
-        in_table = {(str(array.beacons.beacon_id[r]), field) for field, moved in changed for r in np.flatnonzero(moved)}
+        table = kept
     elif array.decided():
-        with open(beacons_path, encoding="utf-8", newline="") as table:  # its own line ends
-            write_text_atomic(calibrated, calibrated_text(array, table.read()))
+        with open(beacons_path, encoding="utf-8", newline="") as given:  # its own line ends
+            write_text_atomic(calibrated, calibrated_text(array, given.read()))
     else:
         calibrated.unlink(missing_ok=True)
-    write_text_atomic(out_dir / ARRAY_NAME, csv_text(ARRAY_COLUMNS, array_rows(array, in_table)))
+    write_text_atomic(out_dir / ARRAY_NAME, csv_text(ARRAY_COLUMNS, array_rows(array, table)))
     written = [out_dir / ARRAY_NAME] + ([calibrated] if calibrated.is_file() else [])
     if plots:
         names = [f.float_id for f in array.fit.floats]
