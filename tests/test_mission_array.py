@@ -231,7 +231,8 @@ def test_where_the_mission_cannot_split_a_clock_error_it_puts_the_clock_right(mi
 
 def test_the_mission_judges_its_values_at_its_own_z_score(mission):
     """`[checks] mission_z_score` sets where a mission's value is contradicted, a float's
-    `z_score` does not: with the mission's just beyond a fault's z, that fault is undetermined."""
+    `z_score` does not, but for the sources' clocks: with the mission's just beyond a fault's
+    z, that fault is undetermined; with a float's beyond a clock's, the clock is."""
     beacons, simulated = mission
     faulted = _faulted(beacons)
     fit = calibrated_array(_floats(faulted, simulated), faulted, CONFIG).fit
@@ -241,9 +242,15 @@ def test_the_mission_judges_its_values_at_its_own_z_score(mission):
 
     drift = judged(CONFIG.checks)["B5", "drift_s_per_day"]
     assert drift.outcome == CONTRADICTED
-    assert judged(dataclasses.replace(CONFIG.checks, z_score=100.0)) == judged(CONFIG.checks)
+    clock = judged(CONFIG.checks)["B2", "clock_s"]
+    assert clock.outcome == CONTRADICTED
+    stricter_float = judged(dataclasses.replace(CONFIG.checks, z_score=1.05 * z_of(clock)))
+    assert stricter_float["B2", "clock_s"].outcome != CONTRADICTED
+    del stricter_float["B2", "clock_s"]
+    assert stricter_float.items() <= judged(CONFIG.checks).items()
     stricter = dataclasses.replace(CONFIG.checks, mission_z_score=1.05 * z_of(drift))
     assert judged(stricter)["B5", "drift_s_per_day"].outcome == UNDETERMINED
+    assert judged(stricter)["B2", "clock_s"] == clock
 
 
 def test_the_values_the_floats_were_tracked_with_start_released(mission, tmp_path):

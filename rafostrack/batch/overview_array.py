@@ -1,8 +1,9 @@
 """The mission overview's array section: what each mission's array fit left in OUT/<mission>.
 
 The array fit (`array_rounds.py`, `mission/outputs.py`) writes `array.csv` (per source and
-field: given, estimated, sd, outcome, the value the calibrated table holds where it changed it), `array.json`
-(its rounds), `array.png` and, when it decided a value, `beacons-calibrated.csv`. Read back
+field: given, estimated, sd, outcome, the value the calibrated table holds where it changed
+it), `array.json` (its rounds), `array.png` and, when it decided a value,
+`beacons-calibrated.csv`. Read back
 here, each file's failure kept as one line of text (never raised); a mission without
 array.csv has no section. A section: one line (the rounds, what was decided, linked to the
 calibrated table), the values the arrivals do not call consistent, links to array.png and

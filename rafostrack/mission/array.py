@@ -181,8 +181,9 @@ def array_priors(config: Config) -> kalman.KalmanPriors:
 
 
 def changed_values(beacons: BeaconTable, table: BeaconTable) -> dict[str, NDArray[np.bool_]]:
-    """Per table field (offset, drift, position), the rows where `table` (made from `beacons`, with some cells
-    changed) holds another value than `beacons`; none where its sources are not the same."""
+    """Per table field (`TABLE_FIELDS`), the rows where `table` (made from `beacons`, with
+    some cells changed) holds another value than `beacons`; none where its sources are not
+    the same."""
     if not np.array_equal(table.beacon_id, beacons.beacon_id):
         return {field: np.zeros(len(beacons), dtype=bool) for field in TABLE_FIELDS}
     return {
