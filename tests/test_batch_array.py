@@ -12,7 +12,10 @@ import pytest
 from click.testing import CliRunner
 from support import simulated_mission_dir
 
+from rafostrack.batch.array_rounds import fit_mission, round_line
+from rafostrack.batch.discover import discover
 from rafostrack.cli import main
+from rafostrack.io.writers import file_digest
 
 WRONG = {"B3": 30.0, "B5": -40.0}  # s added to the true offsets
 
@@ -71,6 +74,15 @@ def test_the_mission_decides_the_wrong_offsets_tracks_with_them_and_a_rerun_trac
     assert sorted(record["decided"]) == sorted(f"{b} {field}" for b in WRONG for field in ("clock_s", "offset_s"))
     again = _batch(root, out)
     assert again.exit_code == 0 and "0 processed, 3 skipped" in again.output, again.output
+    # A float whose tracking failed in a round keeps the outputs of the table before: the
+    # fit leaves it out (and says so) rather than take it as tracked with this one.
+    run_file = out / "m" / "sim1" / "run.json"
+    run = json.loads(run_file.read_text())
+    run["inputs"]["beacons"]["sha256"] = file_digest(root / "m" / "beacons.csv")
+    run_file.write_text(json.dumps(run))
+    fitted = fit_mission(discover([root])[0], out, (), {}, plots=False, round_=2)
+    assert fitted is not None and fitted.left_out == 1
+    assert "1 float(s) left out: their outputs were tracked with another table" in round_line(fitted, 2)
 
 
 @pytest.mark.slow

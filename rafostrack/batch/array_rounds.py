@@ -49,6 +49,7 @@ class ArrayRound:
     settled: bool  # the table its floats were tracked with holds the decisions already
     trusted: bool = True  # the floats fit one array (`MissionArray.trusted`)
     seconds: float = 0.0  # reading the floats' outputs, the fit and its outputs (wall)
+    left_out: int = 0  # floats whose outputs were tracked with another table (`fit_mission`)
 
 
 def calibrated_tables(missions: Sequence[Mission], out: Path) -> dict[str, Path]:
@@ -75,9 +76,13 @@ def fit_mission(
     map_floats: OrderedMap | None = None,
 ) -> ArrayRound | None:
     """The mission's array fitted on its floats' current outputs and written in
-    OUT/<mission>; None when no float has outputs with enough confident arrivals. The
-    calibrated table is rewritten only when the decisions moved (`settled_in`), and never in
-    the last round: the floats were tracked with the table there is. `map_floats` maps the
+    OUT/<mission>; None when no float has current outputs with enough confident arrivals.
+    Current: tracked with the table the mission's floats are planned with (the calibrated
+    one a round wrote, else beacons.csv); a float whose tracking in this round failed keeps
+    an earlier round's outputs, which the fit leaves out (its "settled" would claim a table
+    the float was not tracked with). The calibrated table is rewritten only when the
+    decisions moved (`settled_in`), and never in the last round: the floats were tracked
+    with the table there is. `map_floats` maps the
     reading of each float's outputs and the fit's per-float work (`pool.ordered_map`; None:
     here)."""
     from ..io import read_beacons
@@ -93,8 +98,10 @@ def fit_mission(
         if (out / mission.name / float_id / "run.json").is_file()
     ]  # fmt: skip
     mapped = map_floats or map
-    tracked = [t for t in mapped(_tracked_or_none, tasks) if t is not None]
+    read = [t for t in mapped(_tracked_or_none, tasks) if t is not None]
     previous = calibrated_tables([mission], out).get(mission.name)
+    current = file_digest(previous if previous is not None else mission.path / "beacons.csv")
+    tracked = [t for t in read if t.beacons_sha256 == current]
     try:
         tracked_with = read_beacons(previous) if previous is not None else None
     except InputError:  # an earlier run's table that no longer reads: written anew
@@ -121,6 +128,7 @@ def fit_mission(
         settled,
         array.is_trusted,
         time.perf_counter() - started,
+        len(read) - len(tracked),
     )
     _record(fitted, mission, out, round_)
     return fitted
@@ -146,7 +154,8 @@ def _record(fitted: ArrayRound, mission: Mission, out: Path, round_: int) -> Non
     except (OSError, ValueError):
         rounds = []
     rounds.append({"round": round_, "floats": fitted.floats, "decided": fitted.decided,
-                   "rms_residual_s": round(fitted.rms_residual_s, 3), "settled": fitted.settled})  # fmt: skip
+                   "rms_residual_s": round(fitted.rms_residual_s, 3), "settled": fitted.settled,
+                   "left_out": fitted.left_out})  # fmt: skip
     record = {
         "beacons_sha256": file_digest(mission.path / "beacons.csv"),
         "calibrated": fitted.calibrated.name if fitted.calibrated is not None else None,
@@ -167,6 +176,8 @@ def round_line(fitted: ArrayRound, round_: int) -> str:
         what += "; settled: the floats were tracked with these values"
     elif round_ == MAX_ROUNDS and fitted.decided:
         what += f"; not settled after {MAX_ROUNDS} rounds: the floats keep the table of the round before"
+    if fitted.left_out:
+        what += f"; {fitted.left_out} float(s) left out: their outputs were tracked with another table"
     return (
         f"mission {fitted.mission}: array fit, round {round_}, {fitted.floats} float(s) fitting it: {what} "
         f"(their weighted rms residual {fitted.rms_residual_s:.2f} s; {fitted.seconds:.1f} s)"

@@ -1,5 +1,6 @@
 """A tracked float read back for the mission's array fit: its inputs with the tables as
-given, and its output directory's track, labels and calibration (`run.json`)."""
+given, and its output directory's track, labels, calibration and the digest of the table it
+was tracked with (`run.json`)."""
 
 from __future__ import annotations
 
@@ -50,10 +51,12 @@ class TrackedFloat:
     problem: FloatProblem
     estimate: Estimate
     hyper: kalman.Hyper
+    beacons_sha256: str | None = None  # of the table it was tracked with (run.json)
 
 
 def tracked_float(inputs: TrackInputs, out_dir: Path) -> TrackedFloat:
     """The float's inputs (the tables as given) and what its output directory holds."""
     problem = load_float(inputs).problem
     run = json.loads((out_dir / "run.json").read_text(encoding="utf-8"))
-    return TrackedFloat(problem, estimate_of(out_dir), hyper_of(run, problem.config))
+    tracked_with = (run.get("inputs") or {}).get("beacons") or {}
+    return TrackedFloat(problem, estimate_of(out_dir), hyper_of(run, problem.config), tracked_with.get("sha256"))
