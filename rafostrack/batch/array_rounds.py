@@ -88,18 +88,11 @@ def fit_mission(
     from ..io import read_beacons
     from ..mission.outputs import CALIBRATED_NAME, write_array_outputs
     from ..mission.run import fit_mission_array
-    from ..run.one_float import TrackInputs
 
     started = time.perf_counter()
-    tasks = [
-        (TrackInputs(float_path=mission.path / f"{float_id}.csv", config_files=config_files, overrides=overrides),
-         out / mission.name / float_id)
-        for float_id in sorted(mission.rows)
-        if (out / mission.name / float_id / "run.json").is_file()
-    ]  # fmt: skip
     mapped = map_floats or map
-    read = [t for t in mapped(_tracked_or_none, tasks) if t is not None]
     previous = calibrated_tables([mission], out).get(mission.name)
+    read = _tracked_floats(mission, out, config_files, overrides, mapped)
     current = file_digest(previous if previous is not None else mission.path / "beacons.csv")
     tracked = [t for t in read if t.beacons_sha256 == current]
     try:
@@ -132,6 +125,22 @@ def fit_mission(
     )
     _record(fitted, mission, out, round_)
     return fitted
+
+
+def _tracked_floats(
+    mission: Mission, out: Path, config_files: tuple[Path, ...], overrides: dict[str, Any], mapped: Any
+) -> list[Any]:
+    """The mission's floats with outputs, read back (`_tracked_or_none`; those that cannot
+    be are left out), the reading mapped by `mapped`."""
+    from ..run.one_float import TrackInputs
+
+    tasks = [
+        (TrackInputs(float_path=mission.path / f"{float_id}.csv", config_files=config_files, overrides=overrides),
+         out / mission.name / float_id)
+        for float_id in sorted(mission.rows)
+        if (out / mission.name / float_id / "run.json").is_file()
+    ]  # fmt: skip
+    return [t for t in mapped(_tracked_or_none, tasks) if t is not None]
 
 
 def _tracked_or_none(task: tuple[Any, Path]) -> Any:
