@@ -82,9 +82,8 @@ def fit_mission(
     an earlier round's outputs, which the fit leaves out (its "settled" would claim a table
     the float was not tracked with). The calibrated table is rewritten only when the
     decisions moved (`settled_in`), and never in the last round: the floats were tracked
-    with the table there is. `map_floats` maps the
-    reading of each float's outputs and the fit's per-float work (`pool.ordered_map`; None:
-    here)."""
+    with the table there is. `map_floats` maps the reading of each float's outputs and the
+    fit's per-float work (`pool.ordered_map`; None: here)."""
     from ..io import read_beacons
     from ..mission.outputs import CALIBRATED_NAME, write_array_outputs
     from ..mission.run import fit_mission_array

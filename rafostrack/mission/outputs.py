@@ -89,10 +89,11 @@ def array_rows(array: MissionArray, table: BeaconTable | None = None) -> list[di
 def calibrated_text(array: MissionArray, given_text: str) -> str:
     """The user's beacons.csv text with the cells `MissionArray.calibrated_beacons` changed."""
     table, beacons = array.calibrated_beacons(), array.beacons
+    changed = changed_values(beacons, table)
     edits = []
     for row in range(len(beacons)):
         cells = {}
-        for field, moved in changed_values(beacons, table).items():
+        for field, moved in changed.items():
             if moved[row]:
                 cells.update(table_cells(table, row, field))
         if cells:
