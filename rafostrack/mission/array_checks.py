@@ -13,8 +13,8 @@ from the joint estimate of (a, d), and its clock over the mission (`clock_check`
 the correction at the arrivals' mean time, where it is nearly uncorrelated with d: decided
 even where the mission cannot split it between offset and drift); the position from that
 of (east, north, a, d), judged along the displacement (a displacement along every float's
-bearing is an offset: only floats heard from several bearings decide it). A source heard on fewer than
-`MIN_SOURCE_ARRIVALS` weighted arrivals in all is not judged.
+bearing is an offset: only floats heard from several bearings decide it). A source heard on
+fewer than `MIN_SOURCE_ARRIVALS` weighted arrivals in all is not judged.
 """
 
 from __future__ import annotations

@@ -86,9 +86,8 @@ def array_rows(array: MissionArray, table: BeaconTable | None = None) -> list[di
     return rows
 
 
-def calibrated_text(array: MissionArray, given_text: str) -> str:
-    """The user's beacons.csv text with the cells `MissionArray.calibrated_beacons` changed."""
-    table, beacons = array.calibrated_beacons(), array.beacons
+def calibrated_text(beacons: BeaconTable, table: BeaconTable, given_text: str) -> str:
+    """The user's beacons.csv text (`beacons` as read) with the cells `table` changed."""
     changed = changed_values(beacons, table)
     edits = []
     for row in range(len(beacons)):
@@ -142,14 +141,15 @@ def write_array_outputs(
     `array.png` in `out_dir`, each written atomically."""
     out_dir.mkdir(parents=True, exist_ok=True)
     calibrated = out_dir / CALIBRATED_NAME
-    table = None
     if kept is not None and calibrated.is_file():
         table = kept
-    elif array.decided():
-        with open(beacons_path, encoding="utf-8", newline="") as given:  # its own line ends
-            write_text_atomic(calibrated, calibrated_text(array, given.read()))
     else:
-        calibrated.unlink(missing_ok=True)
+        table = array.calibrated_beacons()
+        if array.decided():
+            with open(beacons_path, encoding="utf-8", newline="") as given:  # its own line ends
+                write_text_atomic(calibrated, calibrated_text(array.beacons, table, given.read()))
+        else:
+            calibrated.unlink(missing_ok=True)
     write_text_atomic(out_dir / ARRAY_NAME, csv_text(ARRAY_COLUMNS, array_rows(array, table)))
     written = [out_dir / ARRAY_NAME] + ([calibrated] if calibrated.is_file() else [])
     if plots:
