@@ -35,6 +35,7 @@ STAGES: list[tuple[str, str, tuple[str, ...] | None]] = [
      ("window_beacons", "predicted_toa_s", "detection_prob", "window_prediction", "beacon_ranges_m")),
     ("factors", "rafostrack/model/", None),
     ("association", "rafostrack/engines/", None),
+    ("evidence kernel", "rafostrack/likelihoods/window_evidence.py", None),  # all of the above, compiled in one
     ("evidence", "rafostrack/likelihoods/", None),
     ("resampling", "rafostrack/filtering/resampling.py", None),
     ("modes", "rafostrack/filtering/modes.py", None),

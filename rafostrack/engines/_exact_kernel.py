@@ -116,6 +116,23 @@ def _backward_stage(w, pw, i, k, pair_j, pair_jj, nl, table, active, active_pair
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
+def unheard_total(log_unheard, out):  # pragma: no cover - compiled
+    """out[p] = sum_i log u_i of particle p, in beacon order (the window evidence's own sum,
+    `likelihoods._window_kernel`, is the same loop)."""
+    for p in range(log_unheard.shape[0]):
+        out[p] = row_sum(log_unheard[p])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def row_sum(values):  # pragma: no cover - compiled
+    """sum of `values` (1-d) in order, from 0."""
+    total = 0.0
+    for i in range(values.shape[0]):
+        total += values[i]
+    return total
+
+
+@njit(cache=True, nogil=True, boundscheck=False)
 def associate_kernel(
     log_match, log_unheard, pair_j, pair_jj, log_e, marginals, log_z, p_match, p_echo
 ):  # pragma: no cover

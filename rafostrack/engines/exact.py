@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from ..config import Config
 from ..errors import InputError
 from ..model.parallel import threaded
-from ._exact_kernel import associate_kernel, associate_kernel_threaded
+from ._exact_kernel import associate_kernel, associate_kernel_threaded, unheard_total
 from .base import Association, Engine
 
 MAX_SIGNALS = 12
@@ -50,10 +50,11 @@ def associate(
             f"the exact method handles at most {MAX_SIGNALS} stored signals per window "
             f"(cost grows as 2^r); this window has {k}: use --engine bp"
         )
-    log_u_total = log_unheard.sum(axis=1)
+    log_u_total = np.empty(n)
+    unheard_total(np.ascontiguousarray(log_unheard, dtype=np.float64), log_u_total)
     if k == 0 or s == 0:
         return Association(log_u_total, np.zeros((n, s, k)))
-    pair_j, pair_jj, log_e = _pairs(log_echo, k)
+    pair_j, pair_jj, log_e = echo_pairs(log_echo, k)
     log_z = np.empty(n)
     shape = (n, s, k) if marginals else (0, s, k)
     p_match, p_echo = np.empty(shape), np.empty(shape)
@@ -74,7 +75,7 @@ def associate(
     return Association(log_z + log_u_total, p_match, p_echo if len(pair_j) else None)
 
 
-def _pairs(log_echo: NDArray | None, k: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+def echo_pairs(log_echo: NDArray | None, k: int) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """The echo pairs j < j' with E_jj' > 0 (for some particle): their signal indices and
     log E, (1, pairs) or (P, pairs)."""
     if log_echo is None:

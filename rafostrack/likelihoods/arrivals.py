@@ -27,11 +27,12 @@ from numpy.typing import NDArray
 
 from ..config import Config, ModelConfig, QualityConfig
 from ..domain import BeaconTable, FloatInfo, Particles, Window
-from ..engines import Engine, SimulatingEngine, WindowPrediction, engine_from_config
+from ..engines import Engine, SimulatingEngine, WindowPrediction, engine_from_config, exact
 from ..errors import InputError, Notice, WarningKind
 from ..model import measurement as m
 from .base import Evidence, Likelihood, outlier_scale
 from .quality import quality_log_ratio
+from .window_evidence import CompiledWindow, compiled_window, window_evidence
 
 # Particles carrying less than this fraction of the mass are left out when association
 # marginals are recomputed for a reweighted (smoothed) cloud.
@@ -119,7 +120,12 @@ class RankedArrivals(ArrivalLikelihood):
 
     def evaluate(self, particles: Particles, observation: Window, *, marginals: bool = True) -> Evidence:
         window = observation
-        wb, signals = self._per_window(window, self._window_terms)
+        terms = self._per_window(window, self._window_terms)
+        if isinstance(terms, CompiledWindow):
+            lat, lon, clock_s = particles.lat, particles.lon, particles.clock_s
+            loglik, p_match = window_evidence(terms, lat, lon, clock_s, marginals=marginals)
+            return Evidence(loglik, terms.beacon_index, p_match)
+        wb, signals = terms
         mu, p_detect = m.beacon_prediction(wb, self.model, particles.lat, particles.lon)
         mu = with_particle_clock(mu, particles)
         if self._simulator is not None:
@@ -145,14 +151,23 @@ class RankedArrivals(ArrivalLikelihood):
         assoc = self._sum(factors.log_match, factors.log_unheard, marginals=marginals, log_echo=factors.log_echo)
         return Evidence(factors.log_base + assoc.log_z, wb.index, assoc.p_match if marginals else None)
 
-    def _window_terms(self, window: Window) -> tuple[m.WindowBeacons, m.SignalTerms | None]:
-        """The window's active beacons and, for the association sum, its signals' terms."""
+    def _window_terms(self, window: Window) -> CompiledWindow | tuple[m.WindowBeacons, m.SignalTerms | None]:
+        """With the exact engine, the window's terms for the compiled evidence
+        (`window_evidence`); else its active beacons and, for the association sum, its
+        signals' terms."""
         wb = m.window_beacons(self.beacons, self.info, window.time)
         if self._simulator is not None:
             return wb, None
-        return wb, m.signal_terms(
+        signals = m.signal_terms(
             window.toa_s, max_signals=self.info.max_signals, window_s=self.info.window_s, model=self.model
         )
+        if self._sum is exact.associate:
+            ratio = self._source_log_ratio(window)
+            toa = window.toa_s
+            compiled = compiled_window(wb, signals, toa, self.model, ranked=self.ranked, source_log_ratio=ratio)
+            if compiled is not None:
+                return compiled
+        return wb, signals
 
     def _source_log_ratio(self, window: Window) -> NDArray | None:
         """The window's correlation heights as source-vs-clutter evidence, when configured."""

@@ -89,7 +89,7 @@ def window_beacons(
     return WindowBeacons(index, beacons.lat[index], beacons.lon[index], delay, *per_beacon)
 
 
-def _per_beacon(values: NDArray | None, default: float) -> NDArray | float:
+def per_beacon(values: NDArray | None, default: float) -> NDArray | float:
     """Per-beacon values with NaN (or all, when None) replaced by the model's `default`."""
     return default if values is None else np.where(np.isnan(values), default, values)
 
@@ -103,18 +103,19 @@ def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np
 def predicted_toa_s(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
     """Predicted arrival times mu_i = delay_i + range_i / c_i, shape (P, s) (c_i the beacon's
     sound speed where calibrated, else the model's)."""
-    return wb.delay_s[None, :] + ranges_m / _per_beacon(wb.sound_speed_m_s, model.sound_speed_m_s)
+    return wb.delay_s[None, :] + ranges_m / per_beacon(wb.sound_speed_m_s, model.sound_speed_m_s)
 
 
 def detection_prob(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
     """Pd as a function of range: p_i / (1 + exp((range - R_i) / w)), the peak probability
     p_i and half range R_i per beacon where calibrated, else the model's (R = 0: no fall-off)."""
-    p = _per_beacon(wb.p_detect, model.p_detect)
-    r50 = _per_beacon(wb.detection_range_km, model.detection_range_km)
+    p = per_beacon(wb.p_detect, model.p_detect)
+    r50 = per_beacon(wb.detection_range_km, model.detection_range_km)
     if np.all(np.asarray(r50) <= 0):
         return np.broadcast_to(p, ranges_m.shape) * np.ones(ranges_m.shape)
     z = (ranges_m / 1e3 - r50) / model.detection_falloff_km
-    falloff = np.where(np.asarray(r50) > 0, 0.5 * (1.0 - np.tanh(0.5 * z)), 1.0)  # 1 / (1 + e^z), overflow-free
+    with np.errstate(over="ignore"):  # e^z = inf far beyond R: Pd 0
+        falloff = np.where(np.asarray(r50) > 0, 1.0 / (1.0 + np.exp(z)), 1.0)
     return p * falloff
 
 
