@@ -20,7 +20,6 @@ them means changing the digest here, which refreshes this module's cache.
 from __future__ import annotations
 
 import hashlib
-import math
 from pathlib import Path
 
 import numpy as np
@@ -30,16 +29,14 @@ from ..engines._exact_kernel import LANES, _associate_block, row_sum
 from ..model.geodesy import (
     EXPANSION_STEP_KM,
     EXPANSION_TOLERANCE_M,
-    MIN_EXPANDED,
     _andoyer_m,
     _expanded_point,
     _expansion,
-    _terms,
 )
-from ..model.kernels import _factors_row, constants
+from ..model.kernels import _factors_row, constants, detection_c
 
 DEPENDENCIES = ("engines/_exact_kernel.py", "model/geodesy.py", "model/kernels.py")
-DEPENDENCIES_SHA256 = "7df8a0d30f781912f395e805b04714b5e0811aae6b6ff21d414d3bbb1fa645db"
+DEPENDENCIES_SHA256 = "9e0a772aea592a3dfd2ea4503a4d209bb6b2f34b49e86afae1a21d16a8fb2dc1"
 
 # Rows of the per-beacon terms `beacon` (6, s), and entries of the window's `terms` (9,):
 # its signals' and the measurement model's (`window_evidence_kernel`).
@@ -59,59 +56,55 @@ def dependencies_sha256() -> str:
 
 @njit(cache=True, nogil=True, boundscheck=False)
 def window_evidence_kernel(  # pragma: no cover - compiled
-    lat, lon, clock_s, beacon, toa, terms, no_echo, ratio, pairs, log_e, marginals, loglik, p_match
+    lat, lon, clock_s, near, far, beacon, toa, terms, no_echo, ratio, pairs, log_e, marginals, loglik, p_match
 ):  # fmt: skip
     """loglik (P,) = log p(T | X_p) of one window, and with `marginals` p_match (P, s, K).
 
-    `clock_s` (P,), or (0,) without a clock in the state; `beacon` (6, s): rows `LAT` ..
+    `clock_s` (P,), or (0,) without a clock in the state; the ranges by the exact formula
+    from the particles' and the beacons' point terms `near` (6, P) and `far` (6, s)
+    (`geodesy.stacked_point_terms`, as `geodesy.range_matrix_m` takes them), or, where
+    those are (6, 0), expanded about the cloud's centre; `beacon` (6, s): rows `LAT` ..
     `HALF_RANGE_KM`, the model's values where a beacon has none; `toa` (1, K); `terms`
     (`LOG_INTENSITY` .. `FALLOFF_KM`, the detection fall-off's width); `no_echo` (1, K), the
     echo model's per-signal term, or (0, *): none; `ratio` (K,), each signal's
     source-vs-clutter log ratio, or (0,); the echo pairs (j, j') as `pairs` (2, pairs) with
     their log E_jj' (1, pairs). Block by block (`_evidence_block`)."""
-    expanded, centre, coef, far = _ranges_setup(lat, lon, beacon)
+    expanded, centre, coef, far = _ranges_setup(lat, lon, near, far, beacon)
     c = constants(terms[SIGMA_S], terms[MULTIPATH_FRACTION], terms[MULTIPATH_DELAY_S], np.int64(terms[MULTIPATH_SHAPE]))
     pair_e = np.exp(log_e)
     for p0 in range(0, lat.shape[0], LANES):
-        _evidence_block(p0, lat, lon, clock_s, beacon, toa, c, terms, no_echo, ratio, pairs, log_e, pair_e,
+        _evidence_block(p0, lat, lon, clock_s, near, beacon, toa, c, terms, no_echo, ratio, pairs, log_e, pair_e,
                         marginals, expanded, centre, coef, far, loglik, p_match)  # fmt: skip
 
 
 @njit(cache=True, nogil=True, boundscheck=False, parallel=True)
 def window_evidence_kernel_threaded(  # pragma: no cover - compiled
-    lat, lon, clock_s, beacon, toa, terms, no_echo, ratio, pairs, log_e, marginals, loglik, p_match
+    lat, lon, clock_s, near, far, beacon, toa, terms, no_echo, ratio, pairs, log_e, marginals, loglik, p_match
 ):  # fmt: skip
     """`window_evidence_kernel` on numba's threads, a block each (`model.parallel`)."""
-    expanded, centre, coef, far = _ranges_setup(lat, lon, beacon)
+    expanded, centre, coef, far = _ranges_setup(lat, lon, near, far, beacon)
     c = constants(terms[SIGMA_S], terms[MULTIPATH_FRACTION], terms[MULTIPATH_DELAY_S], np.int64(terms[MULTIPATH_SHAPE]))
     pair_e = np.exp(log_e)
     for block in prange((lat.shape[0] + LANES - 1) // LANES):
         p0 = np.intp(block) * LANES
-        _evidence_block(p0, lat, lon, clock_s, beacon, toa, c, terms, no_echo, ratio, pairs, log_e, pair_e,
+        _evidence_block(p0, lat, lon, clock_s, near, beacon, toa, c, terms, no_echo, ratio, pairs, log_e, pair_e,
                         marginals, expanded, centre, coef, far, loglik, p_match)  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
-def _ranges_setup(lat, lon, beacon):  # pragma: no cover - compiled
-    """Whether the ranges are expanded about the cloud's centre (`MIN_EXPANDED` points or
-    more, all finite: `geodesy.ranges_about_centre_m`), with the expansion's centre and
-    coefficients and the beacons' point terms (6, s) (those alone when not expanded)."""
+def _ranges_setup(lat, lon, near, far, beacon):  # pragma: no cover - compiled
+    """Whether the ranges are expanded about the cloud's centre (`near` (6, 0)), with the
+    expansion's centre and coefficients and the beacons' point terms (6, s); else `far`."""
     s = beacon.shape[1]
-    finite = True
-    for p in range(lat.shape[0]):
-        finite = finite and math.isfinite(lat[p]) and math.isfinite(lon[p])
-    if lat.shape[0] >= MIN_EXPANDED and finite:
-        centre, coef, far = _expansion(lat, lon, beacon[LAT], beacon[LON], EXPANSION_STEP_KM)
-        return True, centre, coef, far
-    far = np.empty((6, s))
-    for i in range(s):
-        far[0, i], far[1, i], far[2, i], far[3, i], far[4, i], far[5, i] = _terms(beacon[LAT, i], beacon[LON, i])
+    if near.shape[1] == 0 and lat.shape[0] > 0:
+        centre, coef, far_terms = _expansion(lat, lon, beacon[LAT], beacon[LON], EXPANSION_STEP_KM)
+        return True, centre, coef, far_terms
     return False, np.empty(5), np.empty((s, 6)), far
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
 def _evidence_block(  # pragma: no cover - compiled
-    p0, lat, lon, clock_s, beacon, toa, c, terms, no_echo, ratio, pairs, log_e, pair_e, marginals, expanded,
+    p0, lat, lon, clock_s, near, beacon, toa, c, terms, no_echo, ratio, pairs, log_e, pair_e, marginals, expanded,
     centre, coef, far, loglik, p_match
 ):  # fmt: skip
     """The block of particles from p0: their factors (`_block_factors`), their association
@@ -121,7 +114,7 @@ def _evidence_block(  # pragma: no cover - compiled
     nl = min(LANES, n - p0)
     log_match = np.empty((nl, s, k))
     log_unheard = np.empty((nl, s))
-    _block_factors(p0, nl, lat, lon, clock_s, beacon, toa, c, terms, no_echo, ratio, expanded, centre, coef,
+    _block_factors(p0, nl, lat, lon, clock_s, near, beacon, toa, c, terms, no_echo, ratio, expanded, centre, coef,
                    far, log_match, log_unheard)  # fmt: skip
     log_z = np.empty(nl)
     block_match = p_match[p0 : p0 + nl] if marginals else p_match[0:0]
@@ -135,7 +128,7 @@ def _evidence_block(  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, boundscheck=False)
 def _block_factors(  # pragma: no cover - compiled
-    p0, nl, lat, lon, clock_s, beacon, toa, c, terms, no_echo, ratio, expanded, centre, coef, far, log_match,
+    p0, nl, lat, lon, clock_s, near, beacon, toa, c, terms, no_echo, ratio, expanded, centre, coef, far, log_match,
     log_unheard
 ):  # fmt: skip
     """log w_ij (nl, s, K) and log u_i (nl, s) of the block's particles: their ranges, mu_i
@@ -151,12 +144,12 @@ def _block_factors(  # pragma: no cover - compiled
         if expanded:
             _expanded_point(lane, lat_b, lon_b, centre, coef, far, EXPANSION_TOLERANCE_M / 1e3, ranges)
         else:
-            _exact_ranges(lane, lat_b, lon_b, far, ranges)
+            _exact_ranges(lane, p0 + lane, near, far, ranges)
         for i in range(s):
             mu[lane, i] = beacon[DELAY_S, i] + ranges[lane, i] / beacon[SPEED_M_S, i]
             if clock_s.shape[0]:
                 mu[lane, i] = mu[lane, i] + clock_s[p0 + lane]
-            p_detect[lane, i] = _detection(ranges[lane, i], beacon[P_PEAK, i], beacon[HALF_RANGE_KM, i], falloff_km)
+            p_detect[lane, i] = detection_c(ranges[lane, i], beacon[P_PEAK, i], beacon[HALF_RANGE_KM, i], falloff_km)
     sigma, eps, tau = terms[SIGMA_S], terms[MULTIPATH_FRACTION], terms[MULTIPATH_DELAY_S]
     log_lam, horizon, ranked = terms[LOG_INTENSITY], terms[HORIZON_S : HORIZON_S + 1], terms[RANKED] > 0.0
     for lane in range(nl):
@@ -169,19 +162,11 @@ def _block_factors(  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _exact_ranges(lane, lat, lon, far, out):  # pragma: no cover - compiled
-    """Point `lane`'s ranges to every beacon by the exact formula (`geodesy._andoyer_m`)."""
-    sb, cb, shb, chb, shl, chl = _terms(lat[lane], lon[lane])
+def _exact_ranges(lane, p, near, far, out):  # pragma: no cover - compiled
+    """Particle p's ranges to every beacon by the exact formula (`geodesy._andoyer_m`, as
+    `geodesy._range_matrix_m` runs it), into row `lane` of `out`."""
     for i in range(far.shape[1]):
-        out[lane, i] = _andoyer_m(sb, cb, shb, chb, shl, chl, far[0, i], far[1, i], far[2, i], far[3, i], far[4, i],
-                                  far[5, i])  # fmt: skip
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _detection(range_m, p_peak, half_range_km, falloff_km):  # pragma: no cover - compiled
-    """Pd = p / (1 + exp((range - R) / w)), as `measurement.detection_prob` (R <= 0: no
-    fall-off)."""
-    if half_range_km <= 0.0:
-        return p_peak * 1.0
-    z = (range_m / 1e3 - half_range_km) / falloff_km
-    return p_peak * (1.0 / (1.0 + math.exp(z)))
+        out[lane, i] = _andoyer_m(
+            near[0, p], near[1, p], near[2, p], near[3, p], near[4, p], near[5, p],
+            far[0, i], far[1, i], far[2, i], far[3, i], far[4, i], far[5, i],
+        )  # fmt: skip

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from ..config import ModelConfig
 from ..engines.exact import MAX_SIGNALS, echo_pairs
 from ..model import measurement as m
+from ..model.geodesy import MIN_EXPANDED, stacked_point_terms
 from ..model.parallel import threaded
 from ._window_kernel import window_evidence_kernel, window_evidence_kernel_threaded
 
@@ -41,6 +42,7 @@ class CompiledWindow:
 # A window's absent terms, shared by every window (the kernel reads only their lengths).
 _NO_ECHO, _NO_RATIO = np.zeros((0, 1)), np.zeros(0)
 _NO_PAIRS, _NO_PAIR_TERMS = np.zeros((2, 0), dtype=np.int64), np.zeros((1, 0))
+_NO_TERMS = np.zeros((6, 0))
 
 
 def compiled_window(
@@ -61,9 +63,9 @@ def compiled_window(
     s = len(wb.index)
     beacon = np.empty((6, s))
     beacon[0], beacon[1], beacon[2] = wb.lat, wb.lon, wb.delay_s
-    beacon[3] = np.broadcast_to(m.per_beacon(wb.sound_speed_m_s, model.sound_speed_m_s), s)
-    beacon[4] = np.broadcast_to(m.per_beacon(wb.p_detect, model.p_detect), s)
-    beacon[5] = np.broadcast_to(m.per_beacon(wb.detection_range_km, model.detection_range_km), s)
+    beacon[3] = m.beacon_values(wb.sound_speed_m_s, model.sound_speed_m_s, s)
+    beacon[4] = m.beacon_values(wb.p_detect, model.p_detect, s)
+    beacon[5] = m.beacon_values(wb.detection_range_km, model.detection_range_km, s)
     pairs, log_e = _NO_PAIRS, _NO_PAIR_TERMS
     if signals.log_echo is not None:
         pair_j, pair_jj, log_e = echo_pairs(signals.log_echo, k)
@@ -107,13 +109,19 @@ def window_evidence(
     (P, s, K), else None."""
     n = len(lat)
     s, k = window.beacon.shape[1], window.toa.shape[1]
+    lat, lon = _kernel_array(lat), _kernel_array(lon)
+    near = far = _NO_TERMS  # ranges about the cloud's centre, as `geodesy.ranges_about_centre_m` decides
+    if n < MIN_EXPANDED or not np.all(np.isfinite(lat) & np.isfinite(lon)):
+        near, far = stacked_point_terms(lat, lon), stacked_point_terms(window.beacon[0], window.beacon[1])
     loglik = np.empty(n)
     p_match = np.empty((n if marginals else 0, s, k))
     kernel = window_evidence_kernel_threaded if threaded(n) else window_evidence_kernel
     kernel(
-        _kernel_array(lat),
-        _kernel_array(lon),
+        lat,
+        lon,
         np.zeros(0) if clock_s is None else _kernel_array(clock_s),
+        near,
+        far,
         window.beacon,
         window.toa,
         window.terms,

@@ -45,7 +45,7 @@ def range_matrix_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: Arra
     """Ranges (m) from each of n points (lat1, lon1) to each of m points (lat2, lon2), (n, m):
     `range_m` of the outer pairs, the same numbers, in one compiled loop over the pairs (e.g.
     particles x beacons) rather than a broadcast of twelve operands."""
-    first, second = _stacked_terms(lat1, lon1), _stacked_terms(lat2, lon2)
+    first, second = stacked_point_terms(lat1, lon1), stacked_point_terms(lat2, lon2)
     out = np.empty((first.shape[1], second.shape[1]))
     _range_matrix_m(first, second, out)
     return out
@@ -106,7 +106,7 @@ def _point_terms(lat_deg: ArrayLike, lon_deg: ArrayLike) -> tuple[tuple[NDArray,
     return (np.sin(b), np.cos(b)), (np.sin(b / 2.0), np.cos(b / 2.0)), (np.sin(half_lon), np.cos(half_lon))
 
 
-def _stacked_terms(lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray[np.float64]:
+def stacked_point_terms(lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray[np.float64]:
     """`_point_terms` of points (flattened) as one (6, n) array, in `_andoyer_m`'s order."""
     return np.array([t for pair in _point_terms(np.ravel(lat_deg), np.ravel(lon_deg)) for t in pair])
 

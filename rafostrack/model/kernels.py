@@ -160,6 +160,23 @@ def toa_cdf_kernel(r, sigma, eps, tau, shape, out):  # pragma: no cover - compil
         out[n] = cdf_c(r[n], c)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def detection_c(range_m: float, p_peak: float, half_range_km: float, falloff_km: float) -> float:  # pragma: no cover
+    """Pd = p / (1 + exp((range - R) / w)) (`measurement.detection_prob`); R <= 0: no fall-off."""
+    if half_range_km <= 0.0:
+        return p_peak * 1.0
+    z = (range_m / 1e3 - half_range_km) / falloff_km
+    return p_peak * (1.0 / (1.0 + math.exp(z)))
+
+
+@njit(cache=True, nogil=True)
+def detection_kernel(ranges_m, p_peak, half_range_km, falloff_km, out):  # pragma: no cover - compiled
+    """out (P, s) = `detection_c` of ranges (P, s) with beacon i's p_peak[i] and half_range_km[i]."""
+    for p in range(ranges_m.shape[0]):
+        for i in range(ranges_m.shape[1]):
+            out[p, i] = detection_c(ranges_m[p, i], p_peak[i], half_range_km[i], falloff_km)
+
+
 @njit(cache=True, nogil=True)
 def factors_kernel(  # pragma: no cover - compiled
     mu, p_detect, toa, sigma, eps, tau, shape, log_lam, h, ranked, signal_term, log_match, log_unheard

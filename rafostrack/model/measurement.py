@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..config import ModelConfig
 from ..domain import BeaconTable, FloatInfo, elapsed_days
 from .geodesy import ranges_about_centre_m
-from .kernels import factors_kernel, factors_kernel_threaded, toa_cdf_kernel, toa_logpdf_kernel
+from .kernels import detection_kernel, factors_kernel, factors_kernel_threaded, toa_cdf_kernel, toa_logpdf_kernel
 from .parallel import threaded
 
 
@@ -94,6 +94,11 @@ def per_beacon(values: NDArray | None, default: float) -> NDArray | float:
     return default if values is None else np.where(np.isnan(values), default, values)
 
 
+def beacon_values(values: NDArray | None, default: float, s: int) -> NDArray[np.float64]:
+    """`per_beacon`'s values as an array of the window's s beacons."""
+    return np.ascontiguousarray(np.broadcast_to(per_beacon(values, default), s), dtype=np.float64)
+
+
 def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np.float64]:
     """Ranges (P, s) from particle positions (P,) to the window's beacons (about the cloud's
     centre, within `geodesy.EXPANSION_TOLERANCE_M` of the exact formula)."""
@@ -108,15 +113,15 @@ def predicted_toa_s(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) ->
 
 def detection_prob(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
     """Pd as a function of range: p_i / (1 + exp((range - R_i) / w)), the peak probability
-    p_i and half range R_i per beacon where calibrated, else the model's (R = 0: no fall-off)."""
-    p = per_beacon(wb.p_detect, model.p_detect)
-    r50 = per_beacon(wb.detection_range_km, model.detection_range_km)
-    if np.all(np.asarray(r50) <= 0):
-        return np.broadcast_to(p, ranges_m.shape) * np.ones(ranges_m.shape)
-    z = (ranges_m / 1e3 - r50) / model.detection_falloff_km
-    with np.errstate(over="ignore"):  # e^z = inf far beyond R: Pd 0
-        falloff = np.where(np.asarray(r50) > 0, 1.0 / (1.0 + np.exp(z)), 1.0)
-    return p * falloff
+    p_i and half range R_i per beacon where calibrated, else the model's (R = 0: no fall-off);
+    ranges (P, s). Compiled (`kernels.detection_c`, which the window evidence's kernel shares)."""
+    ranges = np.ascontiguousarray(np.atleast_2d(ranges_m), dtype=np.float64)
+    s = ranges.shape[1]
+    out = np.empty(ranges.shape)
+    p_peak = beacon_values(wb.p_detect, model.p_detect, s)
+    half_range_km = beacon_values(wb.detection_range_km, model.detection_range_km, s)
+    detection_kernel(ranges, p_peak, half_range_km, float(model.detection_falloff_km), out)
+    return out.reshape(np.shape(ranges_m))
 
 
 def window_prediction(
