@@ -117,8 +117,8 @@ def _backward_stage(w, pw, i, k, pair_j, pair_jj, nl, table, active, active_pair
 
 @njit(cache=True, nogil=True, boundscheck=False)
 def unheard_total(log_unheard, out):  # pragma: no cover - compiled
-    """out[p] = sum_i log u_i of particle p, in beacon order (the window evidence's own sum,
-    `likelihoods._window_kernel`, is the same loop)."""
+    """out[p] = sum_i log u_i of particle p, in beacon order (`row_sum`, which the window
+    evidence's kernel, `likelihoods._window_kernel`, shares)."""
     for p in range(log_unheard.shape[0]):
         out[p] = row_sum(log_unheard[p])
 

@@ -36,7 +36,7 @@ from ..model.geodesy import (
 from ..model.kernels import _factors_row, constants, detection_c
 
 DEPENDENCIES = ("engines/_exact_kernel.py", "model/geodesy.py", "model/kernels.py")
-DEPENDENCIES_SHA256 = "9e0a772aea592a3dfd2ea4503a4d209bb6b2f34b49e86afae1a21d16a8fb2dc1"
+DEPENDENCIES_SHA256 = "0d924d20b09731349c2cb1f9ec307c043a012dd7d29210c4bfe7534d4f1118e2"
 
 # Rows of the per-beacon terms `beacon` (6, s), and entries of the window's `terms` (9,):
 # its signals' and the measurement model's (`window_evidence_kernel`).

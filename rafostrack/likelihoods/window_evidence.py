@@ -19,6 +19,7 @@ from ..engines.exact import MAX_SIGNALS, echo_pairs
 from ..model import measurement as m
 from ..model.geodesy import MIN_EXPANDED, stacked_point_terms
 from ..model.parallel import threaded
+from . import _window_kernel as K
 from ._window_kernel import window_evidence_kernel, window_evidence_kernel_threaded
 
 
@@ -62,10 +63,10 @@ def compiled_window(
         return None
     s = len(wb.index)
     beacon = np.empty((6, s))
-    beacon[0], beacon[1], beacon[2] = wb.lat, wb.lon, wb.delay_s
-    beacon[3] = m.beacon_values(wb.sound_speed_m_s, model.sound_speed_m_s, s)
-    beacon[4] = m.beacon_values(wb.p_detect, model.p_detect, s)
-    beacon[5] = m.beacon_values(wb.detection_range_km, model.detection_range_km, s)
+    beacon[K.LAT], beacon[K.LON], beacon[K.DELAY_S] = wb.lat, wb.lon, wb.delay_s
+    beacon[K.SPEED_M_S] = m.beacon_values(wb.sound_speed_m_s, model.sound_speed_m_s, s)
+    beacon[K.P_PEAK] = m.beacon_values(wb.p_detect, model.p_detect, s)
+    beacon[K.HALF_RANGE_KM] = m.beacon_values(wb.detection_range_km, model.detection_range_km, s)
     pairs, log_e = _NO_PAIRS, _NO_PAIR_TERMS
     if signals.log_echo is not None:
         pair_j, pair_jj, log_e = echo_pairs(signals.log_echo, k)
@@ -76,24 +77,27 @@ def compiled_window(
         wb.index,
         beacon,
         _kernel_array(np.atleast_2d(toa_s)),
-        np.array(
-            [
-                signals.log_intensity,
-                float(signals.horizon),
-                float(signals.log_base),
-                float(ranked),
-                model.toa_sigma_s,
-                model.multipath_fraction,
-                model.multipath_delay_s,
-                model.multipath_delay_shape,
-                model.detection_falloff_km,
-            ]
-        ),
+        _terms(signals, model, ranked),
         _NO_ECHO if len(signals.no_echo) == 0 else _kernel_array(signals.no_echo),
         _NO_RATIO if source_log_ratio is None else _kernel_array(source_log_ratio),
         pairs,
         log_e,
     )
+
+
+def _terms(signals: m.SignalTerms, model: ModelConfig, ranked: bool) -> NDArray[np.float64]:
+    """The kernel's `terms`: the window's signals' and the measurement model's."""
+    terms = np.empty(9)
+    terms[K.LOG_INTENSITY] = signals.log_intensity
+    terms[K.HORIZON_S] = signals.horizon
+    terms[K.LOG_BASE] = signals.log_base
+    terms[K.RANKED] = float(ranked)
+    terms[K.SIGMA_S] = model.toa_sigma_s
+    terms[K.MULTIPATH_FRACTION] = model.multipath_fraction
+    terms[K.MULTIPATH_DELAY_S] = model.multipath_delay_s
+    terms[K.MULTIPATH_SHAPE] = model.multipath_delay_shape
+    terms[K.FALLOFF_KM] = model.detection_falloff_km
+    return terms
 
 
 def window_evidence(
