@@ -29,14 +29,14 @@ from ..engines._exact_kernel import LANES, _associate_block, row_sum
 from ..model.geodesy import (
     EXPANSION_STEP_KM,
     EXPANSION_TOLERANCE_M,
-    _andoyer_m,
     _expanded_point,
     _expansion,
+    exact_ranges_row,
 )
 from ..model.kernels import _factors_row, constants, detection_c
 
 DEPENDENCIES = ("engines/_exact_kernel.py", "model/geodesy.py", "model/kernels.py")
-DEPENDENCIES_SHA256 = "0d924d20b09731349c2cb1f9ec307c043a012dd7d29210c4bfe7534d4f1118e2"
+DEPENDENCIES_SHA256 = "35b7710cf358d1b674de8456a5e25c085d4cd1d46517c7698e0fd15932e30231"
 
 # Rows of the per-beacon terms `beacon` (6, s), and entries of the window's `terms` (9,):
 # its signals' and the measurement model's (`window_evidence_kernel`).
@@ -56,20 +56,20 @@ def dependencies_sha256() -> str:
 
 @njit(cache=True, nogil=True, boundscheck=False)
 def window_evidence_kernel(  # pragma: no cover - compiled
-    lat, lon, clock_s, near, far, beacon, toa, terms, no_echo, ratio, pairs, log_e, marginals, loglik, p_match
+    lat, lon, clock_s, expanded, near, far, beacon, toa, terms, no_echo, ratio, pairs, log_e, marginals, loglik, p_match
 ):  # fmt: skip
     """loglik (P,) = log p(T | X_p) of one window, and with `marginals` p_match (P, s, K).
 
-    `clock_s` (P,), or (0,) without a clock in the state; the ranges by the exact formula
-    from the particles' and the beacons' point terms `near` (6, P) and `far` (6, s)
-    (`geodesy.stacked_point_terms`, as `geodesy.range_matrix_m` takes them), or, where
-    those are (6, 0), expanded about the cloud's centre; `beacon` (6, s): rows `LAT` ..
-    `HALF_RANGE_KM`, the model's values where a beacon has none; `toa` (1, K); `terms`
-    (`LOG_INTENSITY` .. `FALLOFF_KM`, the detection fall-off's width); `no_echo` (1, K), the
-    echo model's per-signal term, or (0, *): none; `ratio` (K,), each signal's
-    source-vs-clutter log ratio, or (0,); the echo pairs (j, j') as `pairs` (2, pairs) with
-    their log E_jj' (1, pairs). Block by block (`_evidence_block`)."""
-    expanded, centre, coef, far = _ranges_setup(lat, lon, near, far, beacon)
+    `clock_s` (P,), or (0,) without a clock in the state; the ranges `expanded` about the
+    cloud's centre (`geodesy.expands_about_centre`), or else by the exact formula from the
+    particles' and the beacons' point terms `near` (6, P) and `far` (6, s)
+    (`geodesy.stacked_point_terms`, as `geodesy.range_matrix_m` takes them); `beacon`
+    (6, s): rows `LAT` .. `HALF_RANGE_KM`, the model's values where a beacon has none;
+    `toa` (1, K); `terms` (`LOG_INTENSITY` .. `FALLOFF_KM`, the detection fall-off's width);
+    `no_echo` (1, K), the echo model's per-signal term, or (0, *): none; `ratio` (K,), each
+    signal's source-vs-clutter log ratio, or (0,); the echo pairs (j, j') as `pairs`
+    (2, pairs) with their log E_jj' (1, pairs). Block by block (`_evidence_block`)."""
+    centre, coef, far = _ranges_setup(lat, lon, expanded, far, beacon)
     c = constants(terms[SIGMA_S], terms[MULTIPATH_FRACTION], terms[MULTIPATH_DELAY_S], np.int64(terms[MULTIPATH_SHAPE]))
     pair_e = np.exp(log_e)
     for p0 in range(0, lat.shape[0], LANES):
@@ -79,10 +79,10 @@ def window_evidence_kernel(  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, boundscheck=False, parallel=True)
 def window_evidence_kernel_threaded(  # pragma: no cover - compiled
-    lat, lon, clock_s, near, far, beacon, toa, terms, no_echo, ratio, pairs, log_e, marginals, loglik, p_match
+    lat, lon, clock_s, expanded, near, far, beacon, toa, terms, no_echo, ratio, pairs, log_e, marginals, loglik, p_match
 ):  # fmt: skip
     """`window_evidence_kernel` on numba's threads, a block each (`model.parallel`)."""
-    expanded, centre, coef, far = _ranges_setup(lat, lon, near, far, beacon)
+    centre, coef, far = _ranges_setup(lat, lon, expanded, far, beacon)
     c = constants(terms[SIGMA_S], terms[MULTIPATH_FRACTION], terms[MULTIPATH_DELAY_S], np.int64(terms[MULTIPATH_SHAPE]))
     pair_e = np.exp(log_e)
     for block in prange((lat.shape[0] + LANES - 1) // LANES):
@@ -92,14 +92,12 @@ def window_evidence_kernel_threaded(  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _ranges_setup(lat, lon, near, far, beacon):  # pragma: no cover - compiled
-    """Whether the ranges are expanded about the cloud's centre (`near` (6, 0)), with the
-    expansion's centre and coefficients and the beacons' point terms (6, s); else `far`."""
-    s = beacon.shape[1]
-    if near.shape[1] == 0 and lat.shape[0] > 0:
-        centre, coef, far_terms = _expansion(lat, lon, beacon[LAT], beacon[LON], EXPANSION_STEP_KM)
-        return True, centre, coef, far_terms
-    return False, np.empty(5), np.empty((s, 6)), far
+def _ranges_setup(lat, lon, expanded, far, beacon):  # pragma: no cover - compiled
+    """Where the ranges are `expanded` about the cloud's centre, the expansion's centre and
+    coefficients and the beacons' point terms (6, s); else placeholders and `far`."""
+    if expanded:
+        return _expansion(lat, lon, beacon[LAT], beacon[LON], EXPANSION_STEP_KM)
+    return np.empty(5), np.empty((beacon.shape[1], 6)), far
 
 
 @njit(cache=True, nogil=True, boundscheck=False)
@@ -144,7 +142,7 @@ def _block_factors(  # pragma: no cover - compiled
         if expanded:
             _expanded_point(lane, lat_b, lon_b, centre, coef, far, EXPANSION_TOLERANCE_M / 1e3, ranges)
         else:
-            _exact_ranges(lane, p0 + lane, near, far, ranges)
+            exact_ranges_row(near, p0 + lane, far, ranges[lane])
         for i in range(s):
             mu[lane, i] = beacon[DELAY_S, i] + ranges[lane, i] / beacon[SPEED_M_S, i]
             if clock_s.shape[0]:
@@ -159,14 +157,3 @@ def _block_factors(  # pragma: no cover - compiled
             for i in range(s):
                 for j in range(k):
                     log_match[lane, i, j] = log_match[lane, i, j] + ratio[j]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _exact_ranges(lane, p, near, far, out):  # pragma: no cover - compiled
-    """Particle p's ranges to every beacon by the exact formula (`geodesy._andoyer_m`, as
-    `geodesy._range_matrix_m` runs it), into row `lane` of `out`."""
-    for i in range(far.shape[1]):
-        out[lane, i] = _andoyer_m(
-            near[0, p], near[1, p], near[2, p], near[3, p], near[4, p], near[5, p],
-            far[0, i], far[1, i], far[2, i], far[3, i], far[4, i], far[5, i],
-        )  # fmt: skip

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from ..config import ModelConfig
 from ..engines.exact import MAX_SIGNALS, echo_pairs
 from ..model import measurement as m
-from ..model.geodesy import MIN_EXPANDED, stacked_point_terms
+from ..model.geodesy import expands_about_centre, stacked_point_terms
 from ..model.parallel import threaded
 from . import _window_kernel as K
 from ._window_kernel import window_evidence_kernel, window_evidence_kernel_threaded
@@ -114,9 +114,10 @@ def window_evidence(
     n = len(lat)
     s, k = window.beacon.shape[1], window.toa.shape[1]
     lat, lon = _kernel_array(lat), _kernel_array(lon)
-    near = far = _NO_TERMS  # ranges about the cloud's centre, as `geodesy.ranges_about_centre_m` decides
-    if n < MIN_EXPANDED or not np.all(np.isfinite(lat) & np.isfinite(lon)):
-        near, far = stacked_point_terms(lat, lon), stacked_point_terms(window.beacon[0], window.beacon[1])
+    expanded = expands_about_centre(lat, lon)
+    near = far = _NO_TERMS
+    if not expanded:
+        near, far = stacked_point_terms(lat, lon), stacked_point_terms(window.beacon[K.LAT], window.beacon[K.LON])
     loglik = np.empty(n)
     p_match = np.empty((n if marginals else 0, s, k))
     kernel = window_evidence_kernel_threaded if threaded(n) else window_evidence_kernel
@@ -124,6 +125,7 @@ def window_evidence(
         lat,
         lon,
         np.zeros(0) if clock_s is None else _kernel_array(clock_s),
+        expanded,
         near,
         far,
         window.beacon,

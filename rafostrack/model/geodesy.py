@@ -55,11 +55,17 @@ def range_matrix_m(lat1: ArrayLike, lon1: ArrayLike, lat2: ArrayLike, lon2: Arra
 def _range_matrix_m(first, second, out):  # pragma: no cover - compiled
     """out[p, i] = `_andoyer_m` of point terms (6, n) column p and (6, m) column i."""
     for p in range(first.shape[1]):
-        for i in range(second.shape[1]):
-            out[p, i] = _andoyer_m(
-                first[0, p], first[1, p], first[2, p], first[3, p], first[4, p], first[5, p],
-                second[0, i], second[1, i], second[2, i], second[3, i], second[4, i], second[5, i],
-            )  # fmt: skip
+        exact_ranges_row(first, p, second, out[p])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def exact_ranges_row(first, p, second, row):  # pragma: no cover - compiled
+    """row[i] = `_andoyer_m` of point terms (6, n) column p and (6, m) column i."""
+    for i in range(second.shape[1]):
+        row[i] = _andoyer_m(
+            first[0, p], first[1, p], first[2, p], first[3, p], first[4, p], first[5, p],
+            second[0, i], second[1, i], second[2, i], second[3, i], second[4, i], second[5, i],
+        )  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
@@ -134,13 +140,19 @@ def ranges_about_centre_m(lat: ArrayLike, lon: ArrayLike, lat_b: ArrayLike, lon_
     gets the exact formula. Fewer than `MIN_EXPANDED` points: `range_matrix_m` itself."""
     lat, lon = np.ravel(np.asarray(lat, dtype=np.float64)), np.ravel(np.asarray(lon, dtype=np.float64))
     lat_b, lon_b = np.ravel(np.asarray(lat_b, dtype=np.float64)), np.ravel(np.asarray(lon_b, dtype=np.float64))
-    if len(lat) < MIN_EXPANDED or not np.all(np.isfinite(lat) & np.isfinite(lon)):
+    if not expands_about_centre(lat, lon):
         return range_matrix_m(lat, lon, lat_b, lon_b)
     centre, coef, far_terms = _expansion(lat, lon, lat_b, lon_b, EXPANSION_STEP_KM)
     out = np.empty((len(lat), len(lat_b)))
     kernel = _expanded_ranges_threaded_m if threaded(len(lat)) else _expanded_ranges_m
     kernel(lat, lon, centre, coef, far_terms, EXPANSION_TOLERANCE_M / 1e3, out)
     return out
+
+
+def expands_about_centre(lat: NDArray, lon: NDArray) -> bool:
+    """Whether `ranges_about_centre_m` expands the ranges of the points (lat, lon) about their
+    centre: `MIN_EXPANDED` points or more, all finite (else the exact formula)."""
+    return len(lat) >= MIN_EXPANDED and bool(np.all(np.isfinite(lat) & np.isfinite(lon)))
 
 
 @njit(cache=True, nogil=True)

@@ -89,14 +89,14 @@ def window_beacons(
     return WindowBeacons(index, beacons.lat[index], beacons.lon[index], delay, *per_beacon)
 
 
-def per_beacon(values: NDArray | None, default: float) -> NDArray | float:
+def _per_beacon(values: NDArray | None, default: float) -> NDArray | float:
     """Per-beacon values with NaN (or all, when None) replaced by the model's `default`."""
     return default if values is None else np.where(np.isnan(values), default, values)
 
 
 def beacon_values(values: NDArray | None, default: float, s: int) -> NDArray[np.float64]:
-    """`per_beacon`'s values as an array of the window's s beacons."""
-    return np.ascontiguousarray(np.broadcast_to(per_beacon(values, default), s), dtype=np.float64)
+    """`_per_beacon`'s values as an array of the window's s beacons."""
+    return np.ascontiguousarray(np.broadcast_to(_per_beacon(values, default), s), dtype=np.float64)
 
 
 def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np.float64]:
@@ -108,7 +108,7 @@ def beacon_ranges_m(lat: NDArray, lon: NDArray, wb: WindowBeacons) -> NDArray[np
 def predicted_toa_s(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
     """Predicted arrival times mu_i = delay_i + range_i / c_i, shape (P, s) (c_i the beacon's
     sound speed where calibrated, else the model's)."""
-    return wb.delay_s[None, :] + ranges_m / per_beacon(wb.sound_speed_m_s, model.sound_speed_m_s)
+    return wb.delay_s[None, :] + ranges_m / _per_beacon(wb.sound_speed_m_s, model.sound_speed_m_s)
 
 
 def detection_prob(ranges_m: NDArray, wb: WindowBeacons, model: ModelConfig) -> NDArray[np.float64]:
