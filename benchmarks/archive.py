@@ -11,9 +11,13 @@ would (a fresh process, no plots), with `--jobs` = all cores, and, with `--dask`
 a Dask LocalCluster of as many single-threaded workers (`--scheduler`). Prints wall time,
 floats per minute, window-days per second, and the peak resident memory of the largest
 process (the batch process and its workers: `ru_maxrss` of the children; for Dask, of the
-workers as reported by the scheduler).
+workers as reported by the scheduler), and the mission's rounds as its log has them.
 
-    python benchmarks/archive.py [--floats 140] [--days N] [--jobs N] [--dask] [--keep DIR]
+`--offset-fault S` writes the table of the source the most floats hear S seconds off: the
+mission decides it after the first round and tracks again the floats hearing it (the whole
+mission method, two rounds and the array fits, as a faulted catalogue costs it).
+
+    python benchmarks/archive.py [--floats 140] [--jobs N] [--offset-fault S] [--dask] [--keep DIR]
 
 `--floats K` takes the first K floats (a quick look; floats/min is per float of ~2 years).
 """
@@ -80,6 +84,26 @@ def write_archive(mission: Path, n_floats: int | None, seed: int = SEED) -> Simu
     return simulated
 
 
+def fault_offset(mission: Path, seconds: float) -> str:
+    """Write the offset of the source most heard (by the arrival files' true labels) in
+    `mission`'s beacons.csv `seconds` off; returns its id."""
+    heard = pd.concat([pd.read_csv(f, usecols=["beacon_id"]) for f in sorted(mission.glob("*.csv"))
+                       if f.name not in ("beacons.csv", "floats.csv")])  # fmt: skip
+    source = str(heard["beacon_id"].value_counts().idxmax())
+    table = pd.read_csv(mission / "beacons.csv", dtype=str, keep_default_na=False)
+    row = table["beacon_id"] == source
+    table.loc[row, "offset_s"] = f"{float(table.loc[row, 'offset_s'].iloc[0]) + seconds:g}"
+    table.to_csv(mission / "beacons.csv", index=False)
+    return source
+
+
+def _rounds(out: Path) -> list[str]:
+    """The batch log's first line and its mission's array-fit lines (one per round), with
+    their times: each round's wall time is between them."""
+    lines = (out / "batch.log").read_text().splitlines()
+    return lines[:1] + [line for line in lines if "array fit, round" in line]
+
+
 def _rafostrack() -> str:
     exe = shutil.which("rafostrack", path=str(Path(sys.executable).parent))
     if exe is None:
@@ -108,6 +132,7 @@ def main() -> None:
     parser.add_argument("--floats", type=int, default=None, help="the first K floats (default: all 140)")
     parser.add_argument("--jobs", type=int, default=default_jobs())
     parser.add_argument("--seed", type=int, default=SEED)
+    parser.add_argument("--offset-fault", type=float, default=0.0, help="the most heard source's offset so far off (s)")
     parser.add_argument("--dask", action="store_true", help="also run on a Dask LocalCluster")
     parser.add_argument("--keep", type=Path, help="write the archive and outputs here instead of a temporary dir")
     args = parser.parse_args()
@@ -124,11 +149,14 @@ def main() -> None:
             f"({n_windows / len(floats):.0f} per float), simulated in {time.perf_counter() - started:.0f} s; "
             f"{args.jobs} job(s) on {default_jobs()} core(s)"
         )
+        if args.offset_fault:
+            print(f"tables: {fault_offset(mission, args.offset_fault)}'s offset written {args.offset_fault:g} s off")
         print(f"{'run':>18} {'wall s':>8} {'floats/min':>10} {'windows/s':>12} {'peak MB':>12}")
         command = [_rafostrack(), "batch", str(mission.parent), "--no-plots", "--jobs", str(args.jobs)]
         elapsed = _run([*command, "--out", str(root / "out-local")])
         peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         _report(f"local --jobs {args.jobs}", elapsed, len(floats), n_windows, peak_mb)
+        print("\n".join(_rounds(root / "out-local")))
         if args.dask:
             from dask.distributed import LocalCluster
 
