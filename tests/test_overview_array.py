@@ -95,6 +95,12 @@ def test_a_contradicted_value_is_shown_with_its_estimate_and_the_files_are_linke
     assert "Array fit: 1 table value decided." in page.split("</strong>")[0]
 
 
+def test_the_arrivals_set_aside_are_counted_in_the_rounds_line(tmp_path):
+    rounds = [{**ROUNDS[-1], "set_aside": ["f03 B1", "f07 B2"]}]
+    line = _text(_section(_page(_tree(tmp_path / "out", CONSISTENT, rounds=rounds))).split("<p>")[1])
+    assert "2 float's arrivals of a source set aside as outliers among its floats (array.json)" in line
+
+
 def test_an_all_consistent_array_says_so_in_one_line(tmp_path):
     page = _page(_tree(tmp_path / "out", CONSISTENT))
     section = _section(page)

@@ -50,6 +50,7 @@ class ArrayRound:
     trusted: bool = True  # the floats fit one array (`MissionArray.trusted`)
     seconds: float = 0.0  # reading the floats' outputs, the fit and its outputs (wall)
     left_out: int = 0  # floats whose outputs were tracked with another table (`fit_mission`)
+    set_aside: tuple[str, ...] = ()  # "<float> <source>": arrivals the fit set aside (`MissionArray.set_aside`)
 
 
 def calibrated_tables(missions: Sequence[Mission], out: Path) -> dict[str, Path]:
@@ -121,6 +122,7 @@ def fit_mission(
         array.is_trusted,
         time.perf_counter() - started,
         len(read) - len(tracked),
+        tuple(array.set_aside()),
     )
     _record(fitted, mission, out, round_)
     return fitted
@@ -163,7 +165,7 @@ def _record(fitted: ArrayRound, mission: Mission, out: Path, round_: int) -> Non
         rounds = []
     rounds.append({"round": round_, "floats": fitted.floats, "decided": fitted.decided,
                    "rms_residual_s": round(fitted.rms_residual_s, 3), "settled": fitted.settled,
-                   "left_out": fitted.left_out})  # fmt: skip
+                   "left_out": fitted.left_out, "set_aside": list(fitted.set_aside)})  # fmt: skip
     record = {
         "beacons_sha256": file_digest(mission.path / "beacons.csv"),
         "calibrated": fitted.calibrated.name if fitted.calibrated is not None else None,
@@ -186,6 +188,8 @@ def round_line(fitted: ArrayRound, round_: int) -> str:
         what += f"; not settled after {MAX_ROUNDS} rounds: the floats keep the table of the round before"
     if fitted.left_out:
         what += f"; {fitted.left_out} float(s) left out: their outputs were tracked with another table"
+    if fitted.set_aside:
+        what += f"; {len(fitted.set_aside)} float's arrivals of a source set aside (outliers among its floats)"
     return (
         f"mission {fitted.mission}: array fit, round {round_}, {fitted.floats} float(s) fitting it: {what} "
         f"(their weighted rms residual {fitted.rms_residual_s:.2f} s; {fitted.seconds:.1f} s)"

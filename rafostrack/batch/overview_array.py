@@ -154,13 +154,18 @@ def section_html(section: ArraySection) -> str:
 
 
 def _rounds_text(rounds: Sequence[dict[str, Any]]) -> str:
-    """'3 rounds; in the last, 24 floats fit the array, their weighted rms residual 1.89 s'."""
+    """'3 rounds; in the last, 24 floats fit the array, their weighted rms residual 1.89 s',
+    and how many float's arrivals of a source it set aside, if any."""
     if not rounds:
         return "rounds not known"
     floats, rms_s = rounds[-1].get("floats", "?"), rounds[-1].get("rms_residual_s")
     rms = f"{rms_s:.2f} s" if isinstance(rms_s, int | float) and not isinstance(rms_s, bool) else "not known"
     text = f"{len(rounds)} round{'s' if len(rounds) != 1 else ''}; in the last, "
-    return text + f"{floats} float{'s' if floats != 1 else ''} fit the array, their weighted rms residual {rms}"
+    text += f"{floats} float{'s' if floats != 1 else ''} fit the array, their weighted rms residual {rms}"
+    aside = rounds[-1].get("set_aside")
+    if isinstance(aside, list) and aside:
+        text += f", {len(aside)} float's arrivals of a source set aside as outliers among its floats ({ARRAY_JSON})"
+    return text
 
 
 def _decided_html(section: ArraySection) -> str:

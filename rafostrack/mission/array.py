@@ -10,7 +10,12 @@ so, and not corrected.
 
 Each value is judged with its sd widened to the floats' spread where that is wider
 (`array_checks.widening`): the floats, not their arrivals, are the mission's independent
-units.
+units. A float that stands out among a source's floats (its left-out step an outlier among
+theirs, `array_fit.outlying_pairs`: its track or its labels of that source are off) would
+pull the source's estimate and alone set its spread, hiding what every other float agrees
+on; its arrivals of that source are set aside (weight 0) and the array fitted again, before
+the values are judged and after each release (`OUTLIER_PASSES`), so that the estimate and
+its spread rest on the same floats.
 
 In a later round the floats were tracked with the values an earlier round decided: those
 start released (`released_in`). Their tracks and labels fit those values, not the table's;
@@ -49,6 +54,7 @@ from .floats import MissionFloat
 TABLE_FIELDS = ("offset_s", "drift_s_per_day", "position")  # the table's values a mission decides
 MAX_RELEASES = 12
 RELEASE_ITERATIONS = 3  # Gauss-Newton steps after a release, from the previous fit
+OUTLIER_PASSES = 3  # at most so many fits again with outlying floats' arrivals set aside
 TRUSTED_RMS = 3.0
 TRUSTED_SHARE = 0.25
 UNTRUSTED_NOTE = "the floats do not fit one array (their tracks or labels are off)"
@@ -125,6 +131,11 @@ class MissionArray:
             if position is not None and position.supported_lat_lon is not None:
                 lat[row], lon[row] = position.supported_lat_lon
         return dataclasses.replace(self.beacons, offset_s=offset, drift_s_per_day=drift, lat=lat, lon=lon)
+
+    def set_aside(self) -> list[str]:
+        """Each float whose arrivals of a source the fit set aside, as "<float> <source>"."""
+        ids = self.beacons.beacon_id
+        return [f"{f.float_id} {ids[row]}" for f in self.fit.floats for row in f.set_aside]
 
     def _decided_by_source(self) -> dict[int, dict[str, MetadataCheck]]:
         """The decided values' checks by source (position in the array's) and field."""
@@ -219,6 +230,7 @@ def calibrated_array(
     priors = array_priors(config)
     released = released_in(ArrayLayout.of(floats), beacons, tracked_with)
     fit = fit_array(floats, config, released, priors=priors, map_floats=map_floats)
+    fit = _outliers_set_aside(fit, config, released, priors, map_floats)
     values = array_values(fit, beacons, config.checks)
     for _ in range(MAX_RELEASES):
         worst = strongest_contradiction(values, released)
@@ -228,12 +240,33 @@ def calibrated_array(
         fit = fit_array(
             fit.floats, config, released, start=fit, priors=priors, iterations=RELEASE_ITERATIONS, map_floats=map_floats
         )
+        fit = _outliers_set_aside(fit, config, released, priors, map_floats)
         values = array_values(fit, beacons, config.checks)
     array = MissionArray(dataclasses.replace(fit, blocks=[]), values, released, beacons)
     if array.trusted(config.model.toa_sigma_s):
         return array
     undecided = [dataclasses.replace(v, check=_untrusted(v.check)) for v in values]
     return dataclasses.replace(array, values=undecided, is_trusted=False)
+
+
+def _outliers_set_aside(
+    fit: ArrayFit, config: Config, released: NDArray[np.bool_], priors: kalman.KalmanPriors, map_floats: FloatMap
+) -> ArrayFit:
+    """The fit again, from it, with each outlying float's arrivals of the source it is an
+    outlier on set aside (`ArrayFit.outlying`; module docstring), until none is found or
+    after `OUTLIER_PASSES`."""
+    for _ in range(OUTLIER_PASSES):
+        if not fit.outlying:
+            break
+        floats = list(fit.floats)
+        for k, g in fit.outlying:
+            aside = {*floats[k].set_aside, int(fit.layout.sources[g])}
+            floats[k] = dataclasses.replace(floats[k], set_aside=tuple(sorted(aside)))
+        start = dataclasses.replace(fit, floats=floats, blocks=[])  # its blocks weighed those arrivals
+        fit = fit_array(
+            floats, config, released, start=start, priors=priors, iterations=RELEASE_ITERATIONS, map_floats=map_floats
+        )
+    return fit
 
 
 def _untrusted(check: MetadataCheck) -> MetadataCheck:

@@ -6,7 +6,8 @@ equations (`schur`).
 Each float keeps its own nodes, clock and mean current, and its own hyperparameters (fitted
 to its arrivals once, at the first linearisation, by maximum marginal likelihood as its
 own calibration does); its arrivals' weights are refitted at every step (`MultipathEM`: a
-delayed or mislabelled arrival gets little weight). The array's unknowns theta are
+delayed or mislabelled arrival gets little weight), and are 0 for a source whose arrivals
+the float has set aside (`MissionFloat.set_aside`). The array's unknowns theta are
 corrections to the tables as given, under the priors of `KalmanPriors` put in once for the
 mission (a float's normal equations leave them out: `linearise(..., array_priors=False)`);
 a source whose value the mission contradicts is `released` (wide priors) and fitted again,
@@ -36,7 +37,7 @@ from ..calibrate.kalman_problem import NODE
 from ..calibrate.noise import MultipathEM
 from ..config import Config
 from .floats import BANDWIDTH, MissionFloat, referred
-from .schur import FloatBlock, solve_mission
+from .schur import FloatBlock, outlying, solve_mission
 
 # A source's unknowns, in the order of `kalman_problem.Problem.per_beacon`'s blocks.
 SOURCE_BLOCKS = ("offset_s", "drift_s_per_day", "slowness_s_per_m", "east_km", "north_km")
@@ -49,6 +50,7 @@ MULTIPATH_TOLERANCE = (1e-2, 1e-2)
 SIGMA_CAP = 3.0  # a float's TOA sd at most this many times the configured one
 # The most a Gauss-Newton step moves a source's unknown, per `SOURCE_BLOCKS` (None: free).
 STEP_LIMITS = (20.0, 0.02, None, 20.0, 20.0)
+OUTLIER_BLOCKS = (0, 1, 3, 4)  # a source's unknowns in which a float is tested for an outlier
 
 
 @dataclass(frozen=True)
@@ -120,6 +122,8 @@ class ArrayFit:
     toa_residual_s: list[NDArray[np.float64]]
     priors: ArrayPriors
     s0: float  # the configured slowness (s/m)
+    # (float, source) positions: an outlier among the floats hearing the source (`outlying_pairs`)
+    outlying: list[tuple[int, int]] = dataclasses.field(default_factory=list)
     # per float, its block at the fit (the last step's), from which a fit started here
     # begins (`_restarted`); empty once the fit is judged (`MissionArray`)
     blocks: list[FloatBlock] = dataclasses.field(default_factory=list, repr=False)
@@ -260,9 +264,10 @@ def fit_array(
         layout = ArrayLayout.of(floats)
         floats = referred(list(floats), layout.sources, layout.mid_days)
         theta, own = _median_offsets(layout, floats, priors), [np.zeros(f.n_own) for f in floats]
-        weight = [np.ones(f.n_arrivals) for f in floats]
+        weight = [f.kept for f in floats]
     else:
-        layout, floats, theta, own, weight = start.layout, start.floats, start.theta, start.own, start.weight
+        layout, floats, theta, own = start.layout, start.floats, start.theta, start.own
+        weight = [w * f.kept for w, f in zip(start.weight, floats, strict=True)]
     s0 = 1.0 / config.model.sound_speed_m_s
     array_priors = ArrayPriors.of(layout, priors, s0, released)
     information = np.diag(1.0 / array_priors.sd() ** 2)
@@ -287,7 +292,28 @@ def fit_array(
         theta = theta + scale * solution.d_theta
         own = [x + scale * dx for x, dx in zip(own, solution.d_own, strict=True)]
         floats = [dataclasses.replace(f, hyper=s.hyper) for f, s in zip(floats, steps, strict=True)]
-        weight, noise = [s.weight for s in steps], [s.noise for s in steps]
-    covariance, jackknife = solution.covariance(), solution.jackknife_covariance()
+        weight = [s.weight * f.kept for s, f in zip(steps, floats, strict=True)]
+        noise = [s.noise for s in steps]
+    left_out = solution.left_out_steps()
+    covariance, jackknife = solution.covariance(), solution.jackknife_covariance(left_out)
+    outlying = outlying_pairs(left_out, layout, floats, weight)
     blocks = [s.block for s in steps]
-    return ArrayFit(layout, floats, theta, covariance, jackknife, own, weight, residuals, array_priors, s0, blocks)
+    return ArrayFit(
+        layout, floats, theta, covariance, jackknife, own, weight, residuals, array_priors, s0, outlying, blocks
+    )
+
+
+def outlying_pairs(
+    left_out: NDArray, layout: ArrayLayout, floats: Sequence[MissionFloat], weight: Sequence[NDArray]
+) -> list[tuple[int, int]]:
+    """(float, source) positions where the float is an outlier among the floats weighing the
+    source's arrivals, in one of the source's offset, drift and position unknowns
+    (`schur.outlying` on the left-out steps `left_out` (F, M))."""
+    sources = [np.searchsorted(layout.sources, f.heard)[f.problem.beacon] for f in floats]
+    pairs = set()
+    for g in range(len(layout.sources)):
+        touching = sum(bool(np.any(w[where == g] > 0)) for w, where in zip(weight, sources, strict=True))
+        columns = layout.column(np.array(OUTLIER_BLOCKS), g)
+        farthest, found = outlying(left_out[:, columns], np.full(len(columns), touching))
+        pairs |= {(int(k), g) for k in farthest[found]}
+    return sorted(pairs)

@@ -39,6 +39,14 @@ class MissionFloat:
     heard: NDArray[np.intp]  # (H_f,) beacon-table rows of the heard sources
     days: NDArray[np.float64]
     hyper: kalman.Hyper
+    # beacon-table rows of heard sources whose arrivals the fit sets aside (their weight 0):
+    # the float is an outlier among those hearing the source (`array_fit.outlying_pairs`)
+    set_aside: tuple[int, ...] = ()
+
+    @property
+    def kept(self) -> NDArray[np.float64]:
+        """(J,) 1 for each arrival the fit weighs, 0 for those of a source set aside."""
+        return (~np.isin(self.heard[self.problem.beacon], self.set_aside)).astype(float)
 
     @property
     def n_own(self) -> int:

@@ -42,8 +42,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import sparse
 from scipy.linalg import cho_factor, cho_solve
+from scipy.stats import f as f_dist
 
 from ..calibrate.banded import BorderedBanded
+
+OUTLIER_ALPHA = 0.01  # `outlying`: how often m equal Gaussian floats give an outlier
+MIN_FLOATS_OUTLYING = 4
 
 
 @dataclass(frozen=True)
@@ -128,15 +132,31 @@ class ArraySolution:
             steps[k] = cho_solve(cho_factor(schur - schur_f, lower=True), rhs - rhs_f)
         return steps
 
-    def jackknife_covariance(self) -> NDArray[np.float64]:
+    def jackknife_covariance(self, steps: NDArray | None = None) -> NDArray[np.float64]:
         """V_J (module docstring): the spread of the array's estimate over the floats left out
-        in turn; zeros with fewer than two floats."""
-        steps = self.left_out_steps()
+        in turn (`steps`, else `left_out_steps()`); zeros with fewer than two floats."""
+        steps = self.left_out_steps() if steps is None else steps
         n = len(steps)
         if n < 2:
             return np.zeros((steps.shape[1], steps.shape[1]))
         centred = steps - steps.mean(axis=0)
         return (n - 1) / n * centred.T @ centred
+
+
+def outlying(steps: NDArray, touching: NDArray[np.int64]) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """Per column of `steps` (F, K), the float farthest from the others' mean, and whether it
+    is an outlier among the m floats touching that unknown (`touching` (K,)): its squared
+    deviation d^2 beyond what m equal Gaussian floats give at `OUTLIER_ALPHA` over all m (a
+    Grubbs test), d^2 / s^2 > m / (m - 1) F^-1(1 - alpha / m; 1, m - 2), s^2 the others' sum
+    of squares over m - 2; never with fewer than four floats (`MIN_FLOATS_OUTLYING`)."""
+    farthest = np.argmax(np.abs(steps - steps.mean(axis=0)), axis=0)
+    rest = np.where(np.arange(len(steps))[:, None] == farthest, np.nan, steps)
+    rest_mean = np.nanmean(rest, axis=0)
+    largest = (steps[farthest, np.arange(steps.shape[1])] - rest_mean) ** 2
+    m = np.maximum(touching, MIN_FLOATS_OUTLYING).astype(float)
+    threshold = m / (m - 1) * f_dist.ppf(1.0 - OUTLIER_ALPHA / m, 1, m - 2)
+    spread = np.maximum(np.nansum((rest - rest_mean) ** 2, axis=0) / (m - 2), np.finfo(float).tiny)
+    return farthest, (touching >= MIN_FLOATS_OUTLYING) & (largest > threshold * spread)
 
 
 def array_system(
