@@ -76,6 +76,10 @@ class ArrayLayout:
         """theta's index of `block`s (of `SOURCE_BLOCKS`) of sources (positions in `sources`)."""
         return np.asarray(1 + len(SOURCE_BLOCKS) * np.asarray(source) + block, dtype=np.intp)
 
+    def arrival_sources(self, f: MissionFloat) -> NDArray[np.intp]:
+        """(J,) each of a float's arrivals' source, as its position in `sources`."""
+        return np.searchsorted(self.sources, f.heard)[f.problem.beacon]
+
     def float_columns(self, f: MissionFloat) -> NDArray[np.intp]:
         """theta's index of each of a float's array unknowns, in its problem's order."""
         where = np.searchsorted(self.sources, f.heard)
@@ -237,7 +241,7 @@ def _median_offsets(layout: ArrayLayout, floats: Sequence[MissionFloat], priors:
     for f in floats:
         u = np.zeros(f.problem.n_unknowns)
         residuals.append(kalman.linearise(f.problem, u, np.ones(f.n_arrivals), priors).toa_residual_s)
-        sources.append(np.searchsorted(layout.sources, f.heard)[f.problem.beacon])
+        sources.append(layout.arrival_sources(f))
     where, r = np.concatenate(sources), np.concatenate(residuals)
     for g in range(len(layout.sources)):
         theta[layout.column(0, g)] = np.median(r[where == g])
@@ -309,7 +313,7 @@ def outlying_pairs(
     """(float, source) positions where the float is an outlier among the floats weighing the
     source's arrivals, in one of the source's offset, drift and position unknowns
     (`schur.outlying` on the left-out steps `left_out` (F, M))."""
-    sources = [np.searchsorted(layout.sources, f.heard)[f.problem.beacon] for f in floats]
+    sources = [layout.arrival_sources(f) for f in floats]
     pairs = set()
     for g in range(len(layout.sources)):
         touching = sum(bool(np.any(w[where == g] > 0)) for w, where in zip(weight, sources, strict=True))

@@ -108,7 +108,7 @@ def source_panels(array: MissionArray) -> list[SourcePanel]:
     for k, f in enumerate(fit.floats):
         at_given = np.zeros(f.problem.n_unknowns)
         lin = kalman.linearise(f.problem, at_given, np.ones(f.n_arrivals), kalman.DEFAULT_PRIORS, array_priors=False)
-        where = np.searchsorted(fit.layout.sources, f.heard)[f.problem.beacon]
+        where = fit.layout.arrival_sources(f)
         times = f.problem.time[f.problem.node]
         for g in np.unique(where):
             sel = where == g
