@@ -152,10 +152,12 @@ def array_values(fit: ArrayFit, beacons: BeaconTable, checks: ChecksConfig, wide
     return found
 
 
+def open_contradictions(values: list[ArrayValue], released: NDArray[np.bool_]) -> list[ArrayValue]:
+    """The contradicted values not yet released (`released` (G, 5) by theta block)."""
+    return [v for v in values if v.check.outcome == CONTRADICTED and not released[v.source, RELEASES[v.check.field][0]]]
+
+
 def strongest_contradiction(values: list[ArrayValue], released: NDArray[np.bool_]) -> ArrayValue | None:
     """The contradicted value farthest from its table value in its sds, of those not yet
     released (`released` (G, 5) by theta block); None when there is none."""
-    open_ = [
-        v for v in values if v.check.outcome == CONTRADICTED and not released[v.source, RELEASES[v.check.field][0]]
-    ]
-    return max(open_, key=lambda v: z_of(v.check), default=None)
+    return max(open_contradictions(values, released), key=lambda v: z_of(v.check), default=None)
