@@ -194,7 +194,7 @@ def test_outputs_do_not_depend_on_the_thread_count(mission_dir, tmp_path):
             **{k: threads for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")},
         }
         out = tmp_path / threads
-        args = [exe, "track", str(float_file), "--out", str(out), "--particles", "400", "--no-plots", "--also-filtered"]
+        args = [exe, "track", str(float_file), "--out", str(out), "--particles", "150", "--no-plots", "--also-filtered"]
         subprocess.run(args, check=True, capture_output=True, env=env)
         digests.append({p.name: p.read_bytes() for p in sorted((out / float_file.stem).glob("*.parquet"))})
     assert digests[0] == digests[1]
