@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import warnings
 
 import numpy as np
 import pytest
@@ -153,6 +154,9 @@ def test_an_outlying_float_is_found_at_its_rate_and_a_far_one_always():
             assert low <= found.mean() <= high
         assert np.all(farthest[found] == 0)  # the shifted float, where one is found
     assert not outlying(np.array([[0.0], [0.1], [1e9]]), np.array([3]))[1].any()  # too few to tell
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # one float: no others to average, and nothing said
+        assert not outlying(np.array([[1e9, 0.0]]), np.array([1, 1]))[1].any()
 
 
 @pytest.fixture(scope="module")

@@ -149,6 +149,8 @@ def outlying(steps: NDArray, touching: NDArray[np.int64]) -> tuple[NDArray[np.in
     deviation d^2 beyond what m equal Gaussian floats give at `OUTLIER_ALPHA` over all m (a
     Grubbs test), d^2 / s^2 > m / (m - 1) F^-1(1 - alpha / m; 1, m - 2), s^2 the others' sum
     of squares over m - 2; never with fewer than four floats (`MIN_FLOATS_OUTLYING`)."""
+    if len(steps) < 2:  # no others to compare with
+        return np.zeros(steps.shape[1], dtype=np.intp), np.zeros(steps.shape[1], dtype=bool)
     farthest = np.argmax(np.abs(steps - steps.mean(axis=0)), axis=0)
     rest = np.where(np.arange(len(steps))[:, None] == farthest, np.nan, steps)
     rest_mean = np.nanmean(rest, axis=0)
