@@ -21,8 +21,9 @@ from rafostrack.io.writers import read_metadata
 
 @pytest.fixture(scope="module")
 def mission_dir(tmp_path_factory):
+    """A simulated mission of 12 days: what the commands write does not depend on its length."""
     out = tmp_path_factory.mktemp("mission")
-    result = CliRunner().invoke(main, ["simulate", str(out), "--days", "30", "--seed", "5"])
+    result = CliRunner().invoke(main, ["simulate", str(out), "--days", "12", "--seed", "5"])
     assert result.exit_code == 0, result.output
     return out
 
