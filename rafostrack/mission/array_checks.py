@@ -68,9 +68,8 @@ def support(fit: ArrayFit) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     n = len(fit.layout.sources)
     floats, arrivals = np.zeros(n, dtype=np.int64), np.zeros(n)
     for f, w in zip(fit.floats, fit.weight, strict=True):
-        where = np.searchsorted(fit.layout.sources, f.heard)
-        floats[where] += 1
-        np.add.at(arrivals, where[f.problem.beacon], w)
+        floats[np.searchsorted(fit.layout.sources, f.heard)] += 1
+        np.add.at(arrivals, fit.layout.arrival_sources(f), w)
     return floats, arrivals
 
 
