@@ -15,7 +15,9 @@ from rafostrack.model.geodesy import (
     local_offsets_km,
     range_m,
     range_matrix_m,
+    range_of_terms_m,
     ranges_about_centre_m,
+    stacked_point_terms,
     wrap_lon,
 )
 
@@ -76,6 +78,19 @@ def test_range_matrix_is_range_m_of_the_outer_pairs_bit_for_bit():
     assert out.shape == (257, 7)
     np.testing.assert_array_equal(out, expected)
     assert out[9, 2] == 0.0 and np.isnan(out[11, 4]) and np.isnan(out[5]).all()
+
+
+def test_ranges_of_point_terms_taken_by_index_are_range_m_bit_for_bit():
+    """Terms computed once per point (nodes, sources) and taken per pair by an index give
+    the numbers `range_m` gives on the pairs themselves (the Kalman fit's arrival ranges)."""
+    rng = np.random.default_rng(4)
+    lat, lon = rng.uniform(-70.0, -50.0, 301), rng.uniform(-70.0, 20.0, 301)
+    source_lat, source_lon = rng.uniform(-70.0, -50.0, 9), rng.uniform(-70.0, 20.0, 9)
+    node, source = rng.integers(0, 301, 2000), rng.integers(0, 9, 2000)
+    out = range_of_terms_m(
+        stacked_point_terms(lat, lon)[:, node], stacked_point_terms(source_lat, source_lon)[:, source]
+    )
+    np.testing.assert_array_equal(out, range_m(lat[node], lon[node], source_lat[source], source_lon[source]))
 
 
 def test_displace_and_offsets_round_trip():

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from scipy import sparse
 
 from ..domain import elapsed_days
-from ..model.geodesy import displace, local_offsets_km, range_m
+from ..model.geodesy import displace, local_offsets_km, range_of_terms_m, stacked_point_terms
 from ..motion.ou import ou_axis_moments
 from .kalman_problem import (
     CLOCK,
@@ -31,23 +31,27 @@ from .kalman_rows import Block, Normal, Rows
 
 def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> NDArray:
     """Arrival rows whitened by sqrt(w) only (the 1 / sigma comes with the hyperparameters);
-    returns the residuals (observed - predicted, s)."""
+    returns the residuals (observed - predicted, s). The ranges' point terms are computed
+    per node and per source and taken per arrival (`_arrival_terms`)."""
     k, i = problem.node, problem.beacon
     lat, lon = node_positions(problem, u)
-    at_lat, at_lon = lat[k], lon[k]
-    blat, blon = problem.beacon_lat[i], problem.beacon_lon[i]
-    r = range_m(at_lat, at_lon, blat, blon)
+    sources = stacked_point_terms(problem.beacon_lat, problem.beacon_lon)[:, i]
+
+    def range_from(east_km: float, north_km: float) -> NDArray:
+        return range_of_terms_m(_arrival_terms(lat, lon, k, east_km, north_km), sources)
+
     step = 0.1  # km, central differences of the range (m per km east / north)
-    grad_e = (range_m(*displace(at_lat, at_lon, step, 0.0), blat, blon)
-              - range_m(*displace(at_lat, at_lon, -step, 0.0), blat, blon)) / (2 * step)  # fmt: skip
-    grad_n = (range_m(*displace(at_lat, at_lon, 0.0, step), blat, blon)
-              - range_m(*displace(at_lat, at_lon, 0.0, -step), blat, blon)) / (2 * step)  # fmt: skip
+    grad_e = (range_from(step, 0.0) - range_from(-step, 0.0)) / (2 * step)
+    grad_n = (range_from(0.0, step) - range_from(0.0, -step)) / (2 * step)
     offsets, drifts, slownesses = (problem.per_beacon(block)[i] for block in range(3))
     slow = problem.slowness_s_per_m + u[problem.ds] + u[slownesses]
     a, d = u[offsets], u[drifts]
+    at = _arrival_terms(lat, lon, k)
     source_entries: list[tuple[NDArray, NDArray]] = []
     if problem.source_positions:
-        r, source_entries = _moved_source_ranges(problem, u, at_lat, at_lon, slow)
+        r, source_entries = _moved_source_ranges(problem, u, at, slow)
+    else:
+        r = range_of_terms_m(at, sources)
     predicted = problem.delay_s + a + d * problem.drift_days + u[NODE * k + CLOCK] + r * slow
     scale = np.sqrt(weight)
     resid = problem.toa_s - predicted
@@ -70,21 +74,34 @@ def _measurements(problem: Problem, u: NDArray, weight: NDArray, rows: Rows) -> 
     return resid
 
 
+def _arrival_terms(
+    lat: NDArray, lon: NDArray, index: NDArray[np.intp], east_km: float = 0.0, north_km: float = 0.0
+) -> NDArray[np.float64]:
+    """(6, J) the point terms (`stacked_point_terms`) of the points (lat, lon) taken at
+    `index` (each arrival's node, or source), displaced by (east_km, north_km) unless both are
+    0: computed on the points, fewer than the arrivals, then taken (every step elementwise:
+    the same numbers as computed per arrival)."""
+    if east_km == 0.0 and north_km == 0.0:  # not displaced: wrapping a longitude may round it
+        return stacked_point_terms(lat, lon)[:, index]
+    return stacked_point_terms(*displace(lat, lon, east_km, north_km))[:, index]
+
+
 def _moved_source_ranges(
-    problem: Problem, u: NDArray, at_lat: NDArray, at_lon: NDArray, slow: NDArray
+    problem: Problem, u: NDArray, at: NDArray, slow: NDArray
 ) -> tuple[NDArray, list[tuple[NDArray, NDArray]]]:
-    """Ranges (m) from the arrivals' nodes to their sources displaced by their position
-    unknowns, and those unknowns' Jacobian entries (s per km, central differences)."""
+    """Ranges (m) from the arrivals' nodes (their point terms `at`) to their sources
+    displaced by their position unknowns, and those unknowns' Jacobian entries (s per km,
+    central differences)."""
     i = problem.beacon
-    east, north = problem.per_beacon(3)[i], problem.per_beacon(4)[i]
-    blat, blon = displace(problem.beacon_lat[i], problem.beacon_lon[i], u[east], u[north])
+    east, north = problem.per_beacon(3), problem.per_beacon(4)
+    blat, blon = displace(problem.beacon_lat, problem.beacon_lon, u[east], u[north])
     step = 0.1  # km
     entries = []
-    for col, (de, dn) in ((east, (step, 0.0)), (north, (0.0, step))):
-        ahead = range_m(at_lat, at_lon, *displace(blat, blon, de, dn))
-        behind = range_m(at_lat, at_lon, *displace(blat, blon, -de, -dn))
+    for col, (de, dn) in ((east[i], (step, 0.0)), (north[i], (0.0, step))):
+        ahead = range_of_terms_m(at, _arrival_terms(blat, blon, i, de, dn))
+        behind = range_of_terms_m(at, _arrival_terms(blat, blon, i, -de, -dn))
         entries.append((col, (ahead - behind) / (2 * step) * slow))
-    return range_m(at_lat, at_lon, blat, blon), entries
+    return range_of_terms_m(at, _arrival_terms(blat, blon, i)), entries
 
 
 def _pair_whitening(var_0: NDArray, cov: NDArray, var_1: NDArray) -> tuple[NDArray, NDArray, NDArray]:

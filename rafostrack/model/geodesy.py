@@ -117,6 +117,13 @@ def stacked_point_terms(lat_deg: ArrayLike, lon_deg: ArrayLike) -> NDArray[np.fl
     return np.array([t for pair in _point_terms(np.ravel(lat_deg), np.ravel(lon_deg)) for t in pair])
 
 
+def range_of_terms_m(first: NDArray, second: NDArray) -> NDArray:
+    """`range_m` between points given by their terms (`stacked_point_terms`, (6, n) each):
+    the same numbers, for points whose terms serve several ranges (computed once per point,
+    and taken for each pair by indexing, the terms being elementwise)."""
+    return _pair_range_m(*first, *second)
+
+
 # Ranges about a centre (`ranges_about_centre_m`): a pair's error bound, |d|^3 (0.25 / (R0 -
 # |d|)^2 + (1 + tan^2 lat0) / a^2) (|d| the point's distance from the centre, R0 the centre's
 # range, a the Earth's radius: the third directional derivative of a distance is at most
