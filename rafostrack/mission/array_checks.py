@@ -64,12 +64,14 @@ class ArrayValue:
 
 
 def support(fit: ArrayFit) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """(G,) per source the floats that heard it and the weight of their arrivals."""
+    """(G,) per source the floats whose arrivals of it weigh in the fit (not those whose
+    arrivals of it were all set aside or given weight 0) and the weight of their arrivals."""
     n = len(fit.layout.sources)
     floats, arrivals = np.zeros(n, dtype=np.int64), np.zeros(n)
     for f, w in zip(fit.floats, fit.weight, strict=True):
-        floats[np.searchsorted(fit.layout.sources, f.heard)] += 1
-        np.add.at(arrivals, fit.layout.arrival_sources(f), w)
+        where = fit.layout.arrival_sources(f)
+        floats[np.unique(where[w > 0])] += 1
+        np.add.at(arrivals, where, w)
     return floats, arrivals
 
 
