@@ -128,6 +128,7 @@ class ChecksConfig:
 
     enabled: bool = setting()
     source_scan: bool = setting()
+    release_sources: bool = setting()
     z_score: float = setting("> 0", _positive)
     launch_z_score: float = setting("> 0", _positive)
     mission_z_score: float = setting("> 0", _positive)

@@ -28,7 +28,7 @@ from rafostrack.calibrate.metadata_checks import (
     warnings_of,
     with_position_alternative,
 )
-from rafostrack.calibrate.release import FIX_KEPT_BEYOND_KM, FIX_KEPT_NOTE
+from rafostrack.calibrate.release import FIX_KEPT_BEYOND_KM, FIX_KEPT_NOTE, SOURCE_KEPT_NOTE
 from rafostrack.calibrate.source_scan import schedule_candidates
 from rafostrack.calibrate.window_check import (
     MIN_LATE_TOAS,
@@ -515,6 +515,24 @@ def test_a_wrong_source_timing_is_named_on_that_source_only(simulated, field, wr
     assert abs(check.supported - float(getattr(beacons, field)[2])) < 3 * check.sd  # the true value
     (warning,) = warnings_of(calibration.checks)
     assert warning.startswith(f"beacons.csv: line 4: field '{field}' of B3: given {given:.4g}")
+
+
+def test_where_sources_are_not_released_a_wrong_offset_is_named_and_the_table_s_kept(simulated):
+    """`[checks] release_sources = false` (a batch's floats tracked with their mission's
+    calibrated table): B3's offset 25 s off is still contradicted and warned of, with the
+    note that the float's track or labels are off, and it is not released: the table the
+    track uses is not moved to the arrivals' value (only within the offset's prior), where
+    with sources released it is."""
+    beacons = simulated[2]
+    given = float(beacons.offset_s[2]) + 25.0
+    config = with_overrides(CONFIG, checks={"release_sources": False})
+    calibration, checks = _checked(simulated, beacon_changes={"offset_s": (2, given)}, config=config)
+    check = checks["B3", "offset_s"]
+    assert check.outcome == CONTRADICTED and check.used == given and check.note == SOURCE_KEPT_NOTE
+    assert next(w for w in warnings_of(calibration.checks) if "of B3" in w).endswith(SOURCE_KEPT_NOTE)
+    assert abs(calibration.beacons.offset_s[2] - check.supported) > 3 * check.sd
+    released, _ = _checked(simulated, beacon_changes={"offset_s": (2, given)})
+    assert abs(released.beacons.offset_s[2] - check.supported) < 3 * check.sd
 
 
 def test_a_source_on_a_few_arrivals_is_not_judged(simulated):

@@ -163,7 +163,8 @@ def plan(
     """Split every float into work to do (tasks) and outcomes known now (skipped, or failed
     before running: unreadable floats.csv, bad mission config, missing arrival file).
     `beacons_of`: per mission name, the table its floats are tracked with instead of its
-    beacons.csv (the mission's calibrated array); its bytes are in the floats' keys."""
+    beacons.csv (the mission's calibrated array); its bytes are in the floats' keys, and
+    those floats release no source value on their own arrivals (`_with_mission_checks`)."""
     batch = _Batch(Path(out).resolve(), tuple(config_files), overrides or {}, plots, force, run_id, beacons_of or {})
     tasks: list[FloatTask] = []
     known: list[FloatOutcome] = []
@@ -198,7 +199,8 @@ def _plan_float(
     if fail is not None:
         status, reason = fail
         return FloatOutcome(mission.name, float_id, status, reason)
-    inputs = TrackInputs(float_path=float_path, config_files=batch.config_files, overrides=batch.overrides)
+    overrides = _with_mission_checks(batch.overrides) if mission.name in batch.beacons_of else batch.overrides
+    inputs = TrackInputs(float_path=float_path, config_files=batch.config_files, overrides=overrides)
     try:
         config = load_config(inputs.config_layers(), inputs.overrides)
         float_sha = file_digest(float_path)
@@ -224,7 +226,7 @@ def _plan_float(
         float_path=float_path,
         out_dir=out_dir,
         config_files=batch.config_files,
-        overrides=batch.overrides,
+        overrides=overrides,
         plots=batch.plots,
         key=key,
         components=components,
@@ -233,6 +235,13 @@ def _plan_float(
         run_id=batch.run_id,
         beacons_path=batch.beacons_of.get(mission.name),
     )
+
+
+def _with_mission_checks(overrides: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """The overrides of a float tracked with its mission's calibrated table: no source value
+    released on its own arrivals (`[checks] release_sources`): the mission's array fit
+    judged every source on all the floats hearing it."""
+    return {**overrides, "checks": {**overrides.get("checks", {}), "release_sources": False}}
 
 
 def config_identity(config: Config) -> dict[str, Any]:

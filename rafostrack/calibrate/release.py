@@ -36,6 +36,11 @@ RELEASED_FIX_SD_KM = 100.0
 RELEASED_CLOCK_SD_S = 120.0
 FIX_KEPT_BEYOND_KM = 50.0
 FIX_KEPT_NOTE = "kept as given: a GPS fix is data, so the track or the tables are wrong here; check them"
+SOURCE_FIELDS = ("offset_s", "drift_s_per_day", "position")  # a source's values a float may release
+SOURCE_KEPT_NOTE = (
+    "kept as in the table: the mission's array fit judged it on every float hearing the source, "
+    "so this float's track or labels are off here; check them"
+)
 
 TimingProblem = tuple[kalman.Problem, NDArray[np.intp], NDArray[np.float64]]  # problem, heard rows, mid days
 Key = tuple[str, str]  # (id, field) of a table value
@@ -80,16 +85,26 @@ def kept_fix(check: MetadataCheck) -> bool:
     return check.field in ("launch_fix", "end_fix") and check.outcome == CONTRADICTED and far
 
 
-def releasable(check: MetadataCheck) -> bool:
-    """A contradicted value calibration may release: any but a fix it keeps."""
-    return check.outcome == CONTRADICTED and not kept_fix(check)
+def kept_source(check: MetadataCheck, release_sources: bool) -> bool:
+    """A source's offset, drift or position the arrivals contradict, where sources are not
+    released (`[checks] release_sources` false: a mission's array judged them): kept."""
+    return not release_sources and check.field in SOURCE_FIELDS and check.outcome == CONTRADICTED
 
 
-def used(check: MetadataCheck) -> MetadataCheck:
+def releasable(check: MetadataCheck, release_sources: bool = True) -> bool:
+    """A contradicted value calibration may release: any but a fix it keeps, or a source's
+    value where sources are not released (`kept_source`)."""
+    return check.outcome == CONTRADICTED and not kept_fix(check) and not kept_source(check, release_sources)
+
+
+def used(check: MetadataCheck, release_sources: bool = True) -> MetadataCheck:
     """`check` with the value the track uses: the arrivals' where they contradict the table or
-    the table has none, the table's otherwise (and for a fix it keeps, with its note)."""
+    the table has none, the table's otherwise (and for a fix or source value it keeps, with
+    its note)."""
     if kept_fix(check):
         return dataclasses.replace(check, used=check.given, note=FIX_KEPT_NOTE)
+    if kept_source(check, release_sources):
+        return dataclasses.replace(check, used=check.given, note=SOURCE_KEPT_NOTE)
     value = check.supported if check.outcome in (CONTRADICTED, ESTIMATED) else check.given
     return dataclasses.replace(check, used=value)
 
