@@ -71,6 +71,8 @@ def test_the_mission_decides_the_wrong_offsets_tracks_with_them_and_a_rerun_trac
         assert Path(run["inputs"]["beacons"]["path"]).name == "beacons-calibrated.csv"
     record = json.loads((out / "m" / "array.json").read_text())
     assert record["rounds"][-1]["settled"]
+    # Round 1's floats were tracked with the table as given; the last round's, within 1 sd.
+    assert record["rounds"][0]["moved_sd"] is None and record["rounds"][-1]["moved_sd"] <= 1.0
     assert sorted(record["decided"]) == sorted(f"{b} {field}" for b in WRONG for field in ("clock_s", "offset_s"))
     again = _batch(root, out)
     assert again.exit_code == 0 and "0 processed, 3 skipped" in again.output, again.output

@@ -164,6 +164,14 @@ def mission():
     return _mission(8, 90)
 
 
+@pytest.fixture(scope="module")
+def faulted_array(mission):
+    """The mission's array calibrated with three values wrong (`_faulted`), and that table."""
+    beacons, simulated = mission
+    faulted = _faulted(beacons)
+    return calibrated_array(_floats(faulted, simulated), faulted, CONFIG), faulted
+
+
 def _faulted(beacons):
     """Three values wrong at once: an offset +25 s, a drift +0.035 s/day, a position 18 km east."""
     offset = beacons.offset_s + np.eye(N_BEACONS)[1] * 25.0
@@ -185,10 +193,9 @@ def _clock_at_mid(table, array, row: int) -> float:
     return float(table.offset_s[row] + table.drift_s_per_day[row] * array.fit.layout.mid_days[g])
 
 
-def test_a_mission_names_several_faults_at_once_and_recovers_them_within_two_sd(mission):
-    beacons, simulated = mission
-    faulted = _faulted(beacons)
-    array = calibrated_array(_floats(faulted, simulated), faulted, CONFIG)
+def test_a_mission_names_several_faults_at_once_and_recovers_them_within_two_sd(mission, faulted_array):
+    beacons, _ = mission
+    array, faulted = faulted_array
     by_value = {(v.check.id, v.check.field): v.check for v in array.values}
     wrong = {("B2", "offset_s"), ("B2", "clock_s"), ("B5", "drift_s_per_day"), ("B7", "position")}
     assert {key for key, c in by_value.items() if c.outcome == CONTRADICTED} == wrong
@@ -251,13 +258,12 @@ def test_where_the_mission_cannot_split_a_clock_error_it_puts_the_clock_right(mi
     assert rows["B2", "clock_s"]["at"] == str((start + mid).astype("datetime64[m]"))
 
 
-def test_the_mission_judges_its_values_at_its_own_z_score(mission):
+def test_the_mission_judges_its_values_at_its_own_z_score(faulted_array):
     """`[checks] mission_z_score` sets where a mission's value is contradicted, a float's
     `z_score` does not, but for the sources' clocks: with the mission's just beyond a fault's
     z, that fault is undetermined; with a float's beyond a clock's, the clock is."""
-    beacons, simulated = mission
-    faulted = _faulted(beacons)
-    fit = calibrated_array(_floats(faulted, simulated), faulted, CONFIG).fit
+    array, faulted = faulted_array
+    fit = array.fit
 
     def judged(checks):
         return {(v.check.id, v.check.field): v.check for v in array_values(fit, faulted, checks)}
@@ -275,15 +281,14 @@ def test_the_mission_judges_its_values_at_its_own_z_score(mission):
     assert judged(stricter)["B2", "clock_s"] == clock
 
 
-def test_the_values_the_floats_were_tracked_with_start_released(mission, tmp_path):
+def test_the_values_the_floats_were_tracked_with_start_released(mission, faulted_array, tmp_path):
     """A later round: the floats tracked with the calibrated table (here, the truth's labels
     and tracks with its decided values). Those values start released and are decided again
     within 2 sd of the truth; the table as given releases nothing. Written with that table
     kept, array.csv's `calibrated` names what the kept table holds, and a kept table stays
     even when this round decides nothing."""
     beacons, simulated = mission
-    faulted = _faulted(beacons)
-    first = calibrated_array(_floats(faulted, simulated), faulted, CONFIG)
+    first, faulted = faulted_array
     table = first.calibrated_beacons()
     layout = first.fit.layout
     assert not released_in(layout, faulted, faulted).any()
@@ -317,6 +322,27 @@ def test_the_values_the_floats_were_tracked_with_start_released(mission, tmp_pat
     assert not (tmp_path / CALIBRATED_NAME).exists()
 
 
+def test_a_table_within_one_sd_of_every_decided_value_holds_the_decisions(faulted_array):
+    """The mission is settled in a table whose decided values lie within one sd of the
+    mission's (B2's clock moved 0.9 sd: settled, 1.1 sd: not), and not in one where a value
+    the mission did not decide differs from the table as given, however little."""
+    array, _ = faulted_array
+    table = array.calibrated_beacons()
+    assert array.moved_sd(table) == 0.0
+    assert array.settled_in(table)
+    clock_sd = next(v.check.sd for v in array.values if (v.check.id, v.check.field) == ("B2", "clock_s"))
+
+    def offset_moved(row: int, by_s: float):
+        return dataclasses.replace(table, offset_s=table.offset_s + by_s * np.eye(N_BEACONS)[row])
+
+    assert array.moved_sd(offset_moved(1, 0.9 * clock_sd)) == pytest.approx(0.9, rel=1e-6)
+    assert array.settled_in(offset_moved(1, 0.9 * clock_sd))
+    assert array.moved_sd(offset_moved(1, -1.1 * clock_sd)) == pytest.approx(1.1, rel=1e-6)
+    assert not array.settled_in(offset_moved(1, -1.1 * clock_sd))
+    assert array.moved_sd(offset_moved(0, 1e-3)) == np.inf  # B1: nothing decided
+    assert not array.settled_in(offset_moved(0, 1e-3))
+
+
 def test_a_mission_with_correct_tables_finds_nothing(mission):
     beacons, simulated = mission
     array = calibrated_array(_floats(beacons, simulated), beacons, CONFIG)
@@ -342,8 +368,11 @@ def test_one_float_off_on_a_source_is_set_aside_and_the_fault_still_named(missio
                               faulted, off.info, CONFIG)  # fmt: skip
     array = calibrated_array(floats, faulted, CONFIG)
     assert f"{off.info.float_id} B2" in array.set_aside()
-    offset = next(v.check for v in array.decided() if (v.check.id, v.check.field) == ("B2", "offset_s"))
+    decided = next(v for v in array.decided() if (v.check.id, v.check.field) == ("B2", "offset_s"))
+    offset = decided.check
     assert abs(offset.supported - beacons.offset_s[1]) < 2 * offset.sd
+    # array.csv's `floats`: those whose arrivals of B2 weigh in, the one set aside not among them.
+    assert decided.floats == sum(1 in f.heard for f in array.fit.floats) - 1
 
 
 def _with_path_biases(estimate, sd_s: float, rng: np.random.Generator):
@@ -376,12 +405,11 @@ def test_the_floats_spread_keeps_correlated_errors_from_being_named(mission):
 
 
 @pytest.mark.slow
-def test_the_fit_over_worker_processes_gives_the_same_bits(mission):
+def test_the_fit_over_worker_processes_gives_the_same_bits(mission, faulted_array):
     """The fit's per-float work mapped over two worker processes (as `rafostrack batch` runs
     it, `pool.ordered_map`) gives the same array, covariance, spread and values as here."""
-    beacons, simulated = mission
-    faulted = _faulted(beacons)
-    here = calibrated_array(_floats(faulted, simulated), faulted, CONFIG)
+    _, simulated = mission
+    here, faulted = faulted_array
     with ordered_map(2) as map_floats:
         there = calibrated_array(_floats(faulted, simulated), faulted, CONFIG, map_floats)
     for field in ("theta", "covariance", "jackknife"):

@@ -19,12 +19,15 @@ was made from the same beacons.csv.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ..errors import InputError
 from ..io.atomic import write_text_atomic
@@ -51,6 +54,8 @@ class ArrayRound:
     seconds: float = 0.0  # reading the floats' outputs, the fit and its outputs (wall)
     left_out: int = 0  # floats whose outputs were tracked with another table (`fit_mission`)
     set_aside: tuple[str, ...] = ()  # "<float> <source>": arrivals the fit set aside (`MissionArray.set_aside`)
+    moved_sd: float | None = None  # how far its floats' table lies from the decisions (`MissionArray.moved_sd`)
+    estimates: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)  # per decided value (`_estimates`)
 
 
 def calibrated_tables(missions: Sequence[Mission], out: Path) -> dict[str, Path]:
@@ -82,10 +87,11 @@ def fit_mission(
     one a round wrote, else beacons.csv); a float whose tracking in this round failed keeps
     an earlier round's outputs, which the fit leaves out (its "settled" would claim a table
     the float was not tracked with). The calibrated table is rewritten only when the
-    decisions moved (`settled_in`), and never in the last round: the floats were tracked
-    with the table there is. `map_floats` maps the reading of each float's outputs and the
-    fit's per-float work (`pool.ordered_map`; None: here)."""
+    decisions moved (`MissionArray.moved_sd` beyond `SETTLING_SD`), and never in the last
+    round: the floats were tracked with the table there is. `map_floats` maps the reading of
+    each float's outputs and the fit's per-float work (`pool.ordered_map`; None: here)."""
     from ..io import read_beacons
+    from ..mission.array import SETTLING_SD
     from ..mission.outputs import CALIBRATED_NAME, write_array_outputs
     from ..mission.run import fit_mission_array
 
@@ -103,7 +109,8 @@ def fit_mission(
     if fitted_mission is None:
         return None
     array = fitted_mission.array
-    settled = tracked_with is not None and array.settled_in(tracked_with)
+    moved = array.moved_sd(tracked_with) if tracked_with is not None else None
+    settled = moved is not None and moved <= SETTLING_SD
     keep = settled or (tracked_with is not None and round_ == MAX_ROUNDS)
     write_array_outputs(
         array, out / mission.name, mission.path / "beacons.csv", plots=plots, kept=tracked_with if keep else None
@@ -123,9 +130,22 @@ def fit_mission(
         time.perf_counter() - started,
         len(read) - len(tracked),
         tuple(array.set_aside()),
+        moved,
+        _estimates(array),
     )
     _record(fitted, mission, out, round_)
     return fitted
+
+
+def _estimates(array: Any) -> dict[str, dict[str, Any]]:
+    """Per decided value ("<source> <field>"), this round's estimate and its sd: each
+    round's evidence, to follow a value from round to round."""
+    found = {}
+    for v in array.decided():
+        c = v.check
+        estimate = " ".join(f"{x:.4f}" for x in c.supported_lat_lon) if c.supported_lat_lon else c.supported
+        found[f"{c.id} {c.field}"] = {"estimated": estimate, "sd": c.sd}
+    return found
 
 
 def _tracked_floats(
@@ -165,7 +185,8 @@ def _record(fitted: ArrayRound, mission: Mission, out: Path, round_: int) -> Non
         rounds = []
     rounds.append({"round": round_, "floats": fitted.floats, "decided": fitted.decided,
                    "rms_residual_s": round(fitted.rms_residual_s, 3), "settled": fitted.settled,
-                   "left_out": fitted.left_out, "set_aside": list(fitted.set_aside)})  # fmt: skip
+                   "left_out": fitted.left_out, "set_aside": list(fitted.set_aside),
+                   "moved_sd": _finite_or_none(fitted.moved_sd), "estimates": fitted.estimates})  # fmt: skip
     record = {
         "beacons_sha256": file_digest(mission.path / "beacons.csv"),
         "calibrated": fitted.calibrated.name if fitted.calibrated is not None else None,
@@ -175,6 +196,11 @@ def _record(fitted: ArrayRound, mission: Mission, out: Path, round_: int) -> Non
     write_text_atomic(path, json.dumps(record, indent=1) + "\n")
 
 
+def _finite_or_none(value: float | None) -> float | None:
+    """A number for JSON: rounded, None where there is none or it is not finite."""
+    return round(value, 2) if value is not None and np.isfinite(value) else None
+
+
 def round_line(fitted: ArrayRound, round_: int) -> str:
     """One log line of a mission's array fit."""
     from ..mission.array import UNTRUSTED_NOTE
@@ -182,6 +208,12 @@ def round_line(fitted: ArrayRound, round_: int) -> str:
     what = f"decided {', '.join(fitted.decided)}" if fitted.decided else "no table value decided"
     if not fitted.trusted:
         what = f"{UNTRUSTED_NOTE}: nothing decided"
+    elif fitted.decided and fitted.moved_sd is not None:
+        what += (
+            f" (the table they were tracked with {fitted.moved_sd:.2f} sd from these at most)"
+            if np.isfinite(fitted.moved_sd)
+            else " (not the values decided in the table they were tracked with)"
+        )
     if fitted.settled:
         what += "; settled: the floats were tracked with these values"
     elif round_ == MAX_ROUNDS and fitted.decided:
