@@ -90,21 +90,13 @@ def fit_mission(
     decisions moved (`MissionArray.moved_sd` beyond `SETTLING_SD`), and never in the last
     round: the floats were tracked with the table there is. `map_floats` maps the reading of
     each float's outputs and the fit's per-float work (`pool.ordered_map`; None: here)."""
-    from ..io import read_beacons
     from ..mission.array import SETTLING_SD
     from ..mission.outputs import CALIBRATED_NAME, write_array_outputs
     from ..mission.run import fit_mission_array
 
     started = time.perf_counter()
     mapped = map_floats or map
-    previous = calibrated_tables([mission], out).get(mission.name)
-    read = _tracked_floats(mission, out, config_files, overrides, mapped)
-    current = file_digest(previous if previous is not None else mission.path / "beacons.csv")
-    tracked = [t for t in read if t.beacons_sha256 == current]
-    try:
-        tracked_with = read_beacons(previous) if previous is not None else None
-    except InputError:  # an earlier run's table that no longer reads: written anew
-        tracked_with = None
+    tracked, left_out, tracked_with = _current_floats(mission, out, config_files, overrides, mapped)
     fitted_mission = fit_mission_array(tracked, mapped, tracked_with)
     if fitted_mission is None:
         return None
@@ -128,13 +120,33 @@ def fit_mission(
         settled,
         array.is_trusted,
         time.perf_counter() - started,
-        len(read) - len(tracked),
+        left_out,
         tuple(array.set_aside()),
         moved,
         _estimates(array),
     )
     _record(fitted, mission, out, round_)
     return fitted
+
+
+def _current_floats(
+    mission: Mission, out: Path, config_files: tuple[Path, ...], overrides: dict[str, Any], mapped: Any
+) -> tuple[list[Any], int, Any]:
+    """The mission's floats whose outputs are current (tracked with the table its floats are
+    planned with: the calibrated one a round wrote, else beacons.csv), how many others were
+    read (left out), and that calibrated table (None: beacons.csv, or an earlier run's table
+    that no longer reads, written anew)."""
+    from ..io import read_beacons
+
+    previous = calibrated_tables([mission], out).get(mission.name)
+    read = _tracked_floats(mission, out, config_files, overrides, mapped)
+    current = file_digest(previous if previous is not None else mission.path / "beacons.csv")
+    tracked = [t for t in read if t.beacons_sha256 == current]
+    try:
+        tracked_with = read_beacons(previous) if previous is not None else None
+    except InputError:
+        tracked_with = None
+    return tracked, len(read) - len(tracked), tracked_with
 
 
 def _estimates(array: Any) -> dict[str, dict[str, Any]]:

@@ -36,7 +36,7 @@ from ..model.geodesy import (
 from ..model.kernels import _factors_row, constants, detection_c
 
 DEPENDENCIES = ("engines/_exact_kernel.py", "model/geodesy.py", "model/kernels.py")
-DEPENDENCIES_SHA256 = "35b7710cf358d1b674de8456a5e25c085d4cd1d46517c7698e0fd15932e30231"
+DEPENDENCIES_SHA256 = "efa37f14f5cd12c9acef4ea8b2b20efba92edff6d07c982e390e3faab41ee1cb"
 
 # Rows of the per-beacon terms `beacon` (6, s), and entries of the window's `terms` (9,):
 # its signals' and the measurement model's (`window_evidence_kernel`).
