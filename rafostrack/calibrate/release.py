@@ -12,7 +12,11 @@ released nor moved (`kept_fix`). So far off, it is the track or the tables that 
 (a wrong source value pulls a float's whole track; a lost first pass contradicts every
 fix), not the satellite fix; the check stays contradicted, with the distance and a note
 saying so, and the float needs a look. (A launch longitude typed with the wrong sign,
-thousands of km off, is `launch_check`'s case.)
+thousands of km off, is `launch_check`'s case.) Likewise, where `[checks] release_sources`
+is false (a batch's floats tracked with their mission's calibrated table), a source's
+offset, drift or position is never released (`kept_source`): the mission's array fit
+judged it on every float hearing the source, and one float alone cannot tell a source's
+error from its own track's.
 
 Values are released one at a time (`calibrate._checked_fit`): a wrong value pulls the fit,
 and with it other values' checks (a wrong source position moves the track, and the end fix
