@@ -87,10 +87,9 @@ def fit_mission(
     one a round wrote, else beacons.csv); a float whose tracking in this round failed keeps
     an earlier round's outputs, which the fit leaves out (its "settled" would claim a table
     the float was not tracked with). The calibrated table is rewritten only when the
-    decisions moved (`MissionArray.moved_sd` beyond `SETTLING_SD`), and never in the last
+    decisions moved (`MissionArray.settled_in`), and never in the last
     round: the floats were tracked with the table there is. `map_floats` maps the reading of
     each float's outputs and the fit's per-float work (`pool.ordered_map`; None: here)."""
-    from ..mission.array import SETTLING_SD
     from ..mission.outputs import CALIBRATED_NAME, write_array_outputs
     from ..mission.run import fit_mission_array
 
@@ -102,7 +101,7 @@ def fit_mission(
         return None
     array = fitted_mission.array
     moved = array.moved_sd(tracked_with) if tracked_with is not None else None
-    settled = moved is not None and moved <= SETTLING_SD
+    settled = tracked_with is not None and array.settled_in(tracked_with)
     keep = settled or (tracked_with is not None and round_ == MAX_ROUNDS)
     write_array_outputs(
         array, out / mission.name, mission.path / "beacons.csv", plots=plots, kept=tracked_with if keep else None

@@ -310,11 +310,4 @@ def _untrusted(check: MetadataCheck) -> MetadataCheck:
     return dataclasses.replace(check, outcome=UNDETERMINED, note=UNTRUSTED_NOTE)
 
 
-__all__ = [
-    "MAX_RELEASES",
-    "MissionArray",
-    "array_priors",
-    "calibrated_array",
-    "changed_values",
-    "released_in",
-]
+__all__ = ["MAX_RELEASES", "MissionArray", "array_priors", "calibrated_array", "changed_values", "released_in"]
