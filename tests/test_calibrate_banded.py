@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from rafostrack.calibrate.banded import BorderedBanded
+from rafostrack.calibrate.banded import BorderedBanded, transposed_product
 
 # (band unknowns n, half-bandwidth b, border size m): narrow and wide bands, no border, a
 # border larger than the band, and the smoother's own layout (6 unknowns a node, b = 11).
@@ -68,6 +68,17 @@ def test_whitened_products_match_dense_numpy(n, b, m):
     changed = columns.copy()
     changed[k:] = rng.normal(size=changed[k:].shape)
     np.testing.assert_array_equal(factor.whitened(changed)[:k], whitened[:k])
+    np.testing.assert_allclose(factor.whitened(columns[:, 2]), whitened[:, 2], rtol=1e-12, atol=1e-12)
+
+
+def test_transposed_product_matches_numpy():
+    """a'b by the compiled loop equals numpy's, for shapes with a side of one or none; a'a
+    exactly symmetric."""
+    rng = np.random.default_rng(4)
+    for n, k, width in [(50, 7, 8), (1, 3, 1), (20, 1, 5), (0, 2, 3)]:
+        a, b = rng.normal(size=(n, k)), rng.normal(size=(n, width))
+        np.testing.assert_allclose(transposed_product(a, b), a.T @ b, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(transposed_product(a, a), transposed_product(a, a).T)
 
 
 @pytest.mark.parametrize(("n", "b", "m"), CASES)

@@ -44,7 +44,7 @@ from scipy import sparse
 from scipy.linalg import cho_factor, cho_solve
 from scipy.stats import f as f_dist
 
-from ..calibrate.banded import BorderedBanded
+from ..calibrate.banded import BorderedBanded, transposed_product
 
 OUTLIER_ALPHA = 0.01  # `outlying`: how often m equal Gaussian floats give an outlier
 MIN_FLOATS_OUTLYING = 4
@@ -71,11 +71,11 @@ def reduced_terms(
 ) -> ReducedTerms:
     """E_f - C_f' N_f^-1 C_f and b_f,th - C_f' N_f^-1 b_f: a float's terms on theta with its
     own unknowns eliminated, each product as W'W with W = G_f^-1 [C_f, b_f] (N_f = G_f G_f',
-    `BorderedBanded.whitened`)."""
+    `BorderedBanded.whitened`; `banded.transposed_product`'s compiled sum, in a fixed order as einsum's)."""
     whitened = own.whitened(np.column_stack([coupling, own_rhs]))
-    w_coupling, w_rhs = whitened[:, :-1], whitened[:, -1]
-    reduced = corner - np.einsum("nk,nl->kl", w_coupling, w_coupling)
-    return ReducedTerms(0.5 * (reduced + reduced.T), array_rhs - np.einsum("nk,n->k", w_coupling, w_rhs), columns)
+    products = transposed_product(whitened, whitened)  # [W, w]'[W, w]: W'W, and W'w in its last column
+    reduced = corner - products[:-1, :-1]
+    return ReducedTerms(0.5 * (reduced + reduced.T), array_rhs - products[:-1, -1], columns)
 
 
 @dataclass(frozen=True)
