@@ -21,9 +21,12 @@ contradicted that were right).
 
     python benchmarks/mission_array.py [--floats 24] [--days 240] [--seed 2026 ...]
                                        [--faults "KIND,... each"] [--jobs 2] [--out DIR]
+                                       [--no-alone] [--report docs/validation.md]
 
 `--faults each` runs every source fault kind alone (a mission each, the same floats),
-besides or instead of the set of several at once.
+besides or instead of the set of several at once; `--no-alone` skips the faulted missions
+without the fit. `--report FILE` writes each run's summary into the `mission-array`
+section of that Markdown file (`benchmarks/report.py`).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from report import markdown_table, write_section
 
 from rafostrack.batch import run_batch
 from rafostrack.domain import days_between
@@ -160,38 +164,98 @@ def array_verdict(out: Path, mission: Path) -> dict[str, object]:
     }
 
 
-def runs(sets: dict[str, tuple[str, ...]]) -> list[tuple[str, str, dict[str, bool]]]:
+def runs(sets: dict[str, tuple[str, ...]], alone: bool = True) -> list[tuple[str, str, dict[str, bool]]]:
     """(name, mission folder, run_batch flags) of each run: the correct tables alone (the
-    reference) and with the array fit, then each fault set's alone and with it."""
+    reference) and with the array fit, then each fault set's alone (unless not `alone`) and
+    with it."""
     found = [(REFERENCE, "correct", {"array_fit": False}), ("correct + array", "correct", {})]
     for name in sets:
         folder = f"faulted-{name}"
-        found += [(f"{name} alone", folder, {"array_fit": False}), (f"{name} + array", folder, {})]
+        found += [(f"{name} alone", folder, {"array_fit": False})] if alone else []
+        found += [(f"{name} + array", folder, {})]
     return found
 
 
-def run(root: Path, seed: int, args: argparse.Namespace) -> None:
+def beyond(table: pd.DataFrame, ok: pd.DataFrame) -> pd.Series:
+    """Per float, whether it is beyond the reference: RMSE > max(5 km, 1.2x), p95 > max(15 km, 1.2x)."""
+    return (table["rmse_km"] > np.maximum(5, 1.2 * ok["rmse_km"])) | (
+        table["p95_km"] > np.maximum(15, 1.2 * ok["p95_km"])
+    )
+
+
+def rounds_of(out: Path) -> str:
+    """The array fit's rounds (`array.json`): per round the values decided and how far the
+    table tracked with lay from them (`moved_sd`), and whether the last settled."""
+    path = out / "m" / "array.json"
+    if not path.exists():
+        return ""
+    rounds = json.loads(path.read_text())["rounds"]
+    moved = [f"{r['moved_sd']:.1f}" if r.get("moved_sd") is not None else "-" for r in rounds]
+    settled = "settled" if rounds[-1]["settled"] else "not settled"
+    decided = ", ".join(str(len(r["decided"])) for r in rounds)
+    return f"{len(rounds)} ({decided} decided; moved {', '.join(moved)} sd; {settled})"
+
+
+def _count_of(count: int, floats: pd.Index) -> str:
+    """A count and, in brackets, the floats it is of."""
+    return f"{count} ({', '.join(floats)})" if count else "0"
+
+
+def summary(seed: int, name: str, table: pd.DataFrame, ok: pd.DataFrame, verdict: dict | None, out: Path) -> dict:
+    """One run's row of the report: the floats against the reference, and the array's verdict."""
+    lost, wrong = beyond(table, ok), table["confident_wrong"]
+    row = {"seed": seed, "run": name,
+           "floats beyond": _count_of(int(lost.sum()), table.index[lost]),
+           "median RMSE km": round(float(table["rmse_km"].median()), 1),
+           "conf. wrong windows": _count_of(int(wrong.sum()), table.index[wrong > 0]),
+           "reference's": int(ok["confident_wrong"].sum()),
+           "fixes moved > 50 km": int(table["fixes_moved"].sum())}  # fmt: skip
+    if verdict is not None:
+        row |= {"faults named": f"{verdict['named']}/{verdict['source faults']}",
+                "within 2 sd": f"{verdict['within 2 sd']}/{verdict['named']}",
+                "false findings": f"{verdict['false findings']}/{verdict['values checked']}",
+                "rounds": rounds_of(out)}  # fmt: skip
+    return row
+
+
+def run(root: Path, seed: int, args: argparse.Namespace) -> list[dict]:
+    """Every run of one scenario seed (`runs`), printed; the report's rows (`summary`)."""
     sets = fault_sets(args.faults)
     make_missions(root, args.floats, args.days, seed, sets, args.clock_share, args.geometry)
-    tables = {}
-    for name, mission, flags in runs(sets):
+    tables, verdicts, seconds = {}, {}, {}
+    for name, mission, flags in runs(sets, not args.no_alone):
         out = root / "out" / name.replace(" ", "_").replace("+", "and")
         started = time.perf_counter()
         run_batch([root / mission], out, jobs=args.jobs, plots=False, stream=open("/dev/null", "w"), **flags)
-        table = scores(out, root / mission / "m")
-        tables[name] = table
-        print(f"seed {seed}, {name}: {time.perf_counter() - started:.0f} s", flush=True)
+        seconds[name] = time.perf_counter() - started
+        tables[name] = scores(out, root / mission / "m")
+        print(f"seed {seed}, {name}: {seconds[name]:.0f} s", flush=True)
         if flags.get("array_fit", True):
-            print(f"  array: {array_verdict(out, root / mission / 'm')}", flush=True)
+            verdicts[name] = array_verdict(out, root / mission / "m")
+            print(f"  array: {verdicts[name]}", flush=True)
     ok = tables[REFERENCE]
     print(pd.concat(tables, axis=1).round(1).to_string())
+    rows = []
     for name, table in tables.items():
-        lost = (table["rmse_km"] > np.maximum(5, 1.2 * ok["rmse_km"])) | (
-            table["p95_km"] > np.maximum(15, 1.2 * ok["p95_km"])
-        )
-        print(f"seed {seed}, {name}: beyond the correct tables alone {int(lost.sum())} of {len(table)}; median RMSE "
-              f"{table['rmse_km'].median():.1f} km; confidently wrong windows {int(table['confident_wrong'].sum())}; "
-              f"fixes moved > 50 km {int(table['fixes_moved'].sum())}")  # fmt: skip
+        out = root / "out" / name.replace(" ", "_").replace("+", "and")
+        rows.append(summary(seed, name, table, ok, verdicts.get(name), out))
+        rows[-1]["seconds"] = round(seconds[name])
+        print(", ".join(f"{k} {v}" for k, v in rows[-1].items()), flush=True)
+    return rows
+
+
+REPORT_HEAD = """Per scenario seed, each run of one mission tracked with `rafostrack batch`: the correct
+tables without the array fit (the reference) and with it, then each fault set (one source
+fault kind alone, or several at once) without the fit and with it (`benchmarks/mission_array.py`,
+module docstring). Floats
+beyond: RMSE > max(5 km, 1.2x) or p95 > max(15 km, 1.2x) the reference's, same float.
+Confidently wrong windows: error > 30 km with sd_km under half of it (the floats having
+them in brackets); the reference's beside. Faults named: contradicted in `array.csv` with
+the right source and field (or by the source's clock over the mission); within 2 sd: the
+named estimate against the truth. False findings: contradicted values that were right, of
+the values checked. Rounds: the array's rounds, the values each decided, how far the
+table each was tracked with lay from its decisions (in their sds), and whether the last
+settled. Seconds: the whole run on two worker processes."""
 
 
 def main() -> None:
@@ -208,14 +272,22 @@ def main() -> None:
     parser.add_argument("--geometry", default="dimes")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", type=Path, help="keep the missions and outputs here")
+    parser.add_argument("--no-alone", action="store_true", help="skip the faulted missions without the array fit")
+    parser.add_argument("--report", type=Path, help="write the runs' summary into this Markdown file's section")
     args = parser.parse_args()
     print(" ".join(sys.argv), flush=True)
+    rows: list[dict] = []
     for seed in args.seed:
         if args.out is not None:
-            run(args.out / str(seed), seed, args)
-            continue
-        with tempfile.TemporaryDirectory() as tmp:
-            run(Path(tmp), seed, args)
+            rows += run(args.out / str(seed), seed, args)
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                rows += run(Path(tmp), seed, args)
+        if args.report is not None:  # after each seed: a long run stopped keeps the seeds done
+            frame = pd.DataFrame(rows)
+            frame = frame[[c for c in frame if c != "seconds"] + ["seconds"]]
+            table = markdown_table(frame, {"median RMSE km": "{:.1f}".format})
+            write_section(args.report, "mission-array", f"{REPORT_HEAD}\n\n{table}")
 
 
 if __name__ == "__main__":
