@@ -218,13 +218,18 @@ def summary(seed: int, name: str, table: pd.DataFrame, ok: pd.DataFrame, verdict
     return row
 
 
+def _out_of(root: Path, name: str) -> Path:
+    """The batch output folder of the run `name`."""
+    return root / "out" / name.replace(" ", "_").replace("+", "and")
+
+
 def run(root: Path, seed: int, args: argparse.Namespace) -> list[dict]:
     """Every run of one scenario seed (`runs`), printed; the report's rows (`summary`)."""
     sets = fault_sets(args.faults)
     make_missions(root, args.floats, args.days, seed, sets, args.clock_share, args.geometry)
     tables, verdicts, seconds = {}, {}, {}
     for name, mission, flags in runs(sets, not args.no_alone):
-        out = root / "out" / name.replace(" ", "_").replace("+", "and")
+        out = _out_of(root, name)
         started = time.perf_counter()
         run_batch([root / mission], out, jobs=args.jobs, plots=False, stream=open("/dev/null", "w"), **flags)
         seconds[name] = time.perf_counter() - started
@@ -237,8 +242,7 @@ def run(root: Path, seed: int, args: argparse.Namespace) -> list[dict]:
     print(pd.concat(tables, axis=1).round(1).to_string())
     rows = []
     for name, table in tables.items():
-        out = root / "out" / name.replace(" ", "_").replace("+", "and")
-        rows.append(summary(seed, name, table, ok, verdicts.get(name), out))
+        rows.append(summary(seed, name, table, ok, verdicts.get(name), _out_of(root, name)))
         rows[-1]["seconds"] = round(seconds[name])
         print(", ".join(f"{k} {v}" for k, v in rows[-1].items()), flush=True)
     return rows
@@ -247,15 +251,15 @@ def run(root: Path, seed: int, args: argparse.Namespace) -> list[dict]:
 REPORT_HEAD = """Per scenario seed, each run of one mission tracked with `rafostrack batch`: the correct
 tables without the array fit (the reference) and with it, then each fault set (one source
 fault kind alone, or several at once) without the fit and with it (`benchmarks/mission_array.py`,
-module docstring). Floats
-beyond: RMSE > max(5 km, 1.2x) or p95 > max(15 km, 1.2x) the reference's, same float.
-Confidently wrong windows: error > 30 km with sd_km under half of it (the floats having
-them in brackets); the reference's beside. Faults named: contradicted in `array.csv` with
-the right source and field (or by the source's clock over the mission); within 2 sd: the
-named estimate against the truth. False findings: contradicted values that were right, of
-the values checked. Rounds: the array's rounds, the values each decided, how far the
-table each was tracked with lay from its decisions (in their sds), and whether the last
-settled. Seconds: the whole run on two worker processes."""
+module docstring). Floats beyond: RMSE > max(5 km, 1.2x) or p95 > max(15 km, 1.2x) the
+reference's, same float. Confidently wrong windows: error > 30 km with sd_km under half of
+it (the floats having them in brackets); the reference's beside. Faults named:
+contradicted in `array.csv` with the right source and field (or by the source's clock over
+the mission); within 2 sd: the named estimate against the truth. False findings:
+contradicted values that were right, of the values checked. Rounds: the array's rounds,
+the values each decided, how far the table each was tracked with lay from its decisions
+(in their sds), and whether the last settled. Seconds: the whole run on two worker
+processes."""
 
 
 def main() -> None:
