@@ -247,11 +247,11 @@ def _checked_fit(
     evidence, until none is left (at most `MAX_RELEASES`). The fit and its checks, each with
     the value the track uses."""
     released: set[Key] = set()
-    sources = problem.config.checks.release_sources
+    release_sources = problem.config.checks.release_sources
     for _ in range(MAX_RELEASES + 1):
         checks = timing_checks(timing.problem, timing.fit, timing.priors, timing.heard, timing.mid, problem.beacons,
                                problem.info, problem.config.checks)  # fmt: skip
-        candidates = [c for c in checks if releasable(c, sources) and key_of(c) not in released]
+        candidates = [c for c in checks if releasable(c, release_sources) and key_of(c) not in released]
         if not candidates or len(released) == MAX_RELEASES:
             break
         trials = []
@@ -262,7 +262,7 @@ def _checked_fit(
             )
         timing, released = max(trials, key=lambda trial: trial[0].fit.log_evidence)
     # A value contradicted only before a release (an echo) is not a finding.
-    return timing, [used(c, sources) for c in checks]
+    return timing, [used(c, release_sources) for c in checks]
 
 
 def _timing_values(fit: kalman.KalmanFit) -> dict[str, float]:

@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 
 from ..calibrate import kalman
 from ..calibrate.metadata_checks import CONTRADICTED, UNDETERMINED, MetadataCheck
+from ..calibrate.release import SOURCE_FIELDS
 from ..config import Config
 from ..domain import BeaconTable
 from ..model.geodesy import local_offsets_km
@@ -64,7 +65,7 @@ from .array_checks import (
 from .array_fit import SOURCE_BLOCKS, ArrayFit, ArrayLayout, FloatMap, fit_array
 from .floats import MissionFloat
 
-TABLE_FIELDS = ("offset_s", "drift_s_per_day", "position")  # the table's values a mission decides
+TABLE_FIELDS = SOURCE_FIELDS  # the table's values a mission decides: a source's offset, drift, position
 MAX_RELEASES = 12
 RELEASE_ITERATIONS = 3  # Gauss-Newton steps after a release, from the previous fit
 OUTLIER_PASSES = 3  # at most so many fits that only set outlying floats' arrivals aside
