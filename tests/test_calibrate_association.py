@@ -15,7 +15,13 @@ import pytest
 from scipy import integrate, stats
 
 from rafostrack.calibrate.association import _delay_mean, fit_association
-from rafostrack.calibrate.noise import direct_probability, fit_clutter_rate, fit_multipath
+from rafostrack.calibrate.noise import (
+    delay_posterior_mean_s,
+    direct_probability,
+    fit_clutter_rate,
+    fit_multipath,
+    fit_multipath_em,
+)
 from rafostrack.config import load_config
 from rafostrack.domain import ArrivalRecord, Window
 from rafostrack.mission.array_fit import MULTIPATH_TOLERANCE
@@ -117,9 +123,9 @@ def test_fit_multipath_recovers_the_mixture(eps, tau):
         assert abs(got_tau / tau - 1) < 0.15
 
 
-def test_the_array_fits_coarser_multipath_is_within_its_tolerance_of_the_fine_one():
-    """At the array fit's tolerances (`MULTIPATH_TOLERANCE`) Nelder-Mead stops within about
-    1% of the calibration's optimum in eps and tau, and its direct-path weights differ by
+def test_the_array_fits_multipath_by_em_is_within_its_tolerance_of_the_fine_one():
+    """At the array fit's tolerance (`MULTIPATH_TOLERANCE`) EM stops within about 1% of the
+    calibration's Nelder-Mead optimum in eps and tau, and its direct-path weights differ by
     less than 0.01, whatever the start."""
     rng = np.random.default_rng(12)
     n, sigma, eps, tau = 3000, 1.5, 0.08, 40.0
@@ -127,7 +133,7 @@ def test_the_array_fits_coarser_multipath_is_within_its_tolerance_of_the_fine_on
     for start_eps, start_tau in ((0.01, 10.0), (0.25, 150.0), (0.08, 40.0)):
         start = dataclasses.replace(MODEL, multipath_fraction=start_eps, multipath_delay_s=start_tau)
         fine = fit_multipath(r, sigma, start)
-        coarse = fit_multipath(r, sigma, start, MULTIPATH_TOLERANCE)
+        coarse = fit_multipath_em(r, sigma, start, MULTIPATH_TOLERANCE)
         np.testing.assert_allclose(coarse, fine, rtol=0.01)
         weights = [
             direct_probability(
@@ -136,6 +142,47 @@ def test_the_array_fits_coarser_multipath_is_within_its_tolerance_of_the_fine_on
             for e, t in (fine, coarse)
         ]
         assert np.max(np.abs(weights[0] - weights[1])) < 0.01
+
+
+@pytest.mark.parametrize("shape", [1, 2])
+def test_em_reaches_nelder_meads_maximum(shape):
+    """EM (`fit_multipath_em`) and Nelder-Mead, two optimisers, meet at the same maximum of
+    the mixture's likelihood to 1e-3, for both delay laws and from starts on either side."""
+    rng = np.random.default_rng(13)
+    n, sigma, eps, tau = 4000, 1.5, 0.1, 30.0
+    delay = rng.gamma(shape, tau / shape, n)
+    r = sigma * rng.standard_normal(n) + np.where(rng.random(n) < eps, delay, 0.0)
+    for start_eps, start_tau in ((0.02, 10.0), (0.25, 150.0)):
+        start = dataclasses.replace(
+            MODEL, multipath_fraction=start_eps, multipath_delay_s=start_tau, multipath_delay_shape=shape
+        )
+        by_nm = fit_multipath(r, sigma, start, (1e-7, 1e-9))
+        by_em = fit_multipath_em(r, sigma, start, (1e-6, 0.0))
+        np.testing.assert_allclose(by_em, by_nm, rtol=1e-3)
+
+
+@pytest.mark.parametrize("shape", [1, 2])
+def test_delay_posterior_mean_against_quadrature(shape):
+    """E[d | r] of a delayed arrival (`delay_posterior_mean_s`) against the ratio of the
+    integrals of d p(d, r) and p(d, r) over d > 0, p(d, r) = Gamma(d; k, tau / k) N(r - d;
+    0, sigma^2), by numerical quadrature: early, central and late residuals."""
+    sigma, tau = 1.5, 25.0
+    model = dataclasses.replace(MODEL, toa_sigma_s=sigma, multipath_delay_s=tau, multipath_delay_shape=shape)
+    residual = np.array([-40.0, -8.0, -1.0, 0.0, 2.0, 10.0, 60.0, 250.0])
+    got = delay_posterior_mean_s(residual, model)
+    for r, value in zip(residual, got, strict=True):
+
+        def integral(power: int, r: float = r) -> float:
+            """The integral of d^power p(d, r) over d > 0 (where the mass is: to r + 12 sigma)."""
+
+            def integrand(d: float) -> float:
+                return d**power * stats.gamma.pdf(d, shape, scale=tau / shape) * stats.norm.pdf(r - d, scale=sigma)
+
+            peak = max(r, 0.0)
+            top = peak + 12 * sigma
+            return integrate.quad(integrand, 0.0, top, points=[peak], epsabs=0, epsrel=1e-12, limit=200)[0]
+
+        np.testing.assert_allclose(value, integral(1) / integral(0), rtol=1e-6)
 
 
 @pytest.mark.parametrize("shape", [1, 2])

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from ..calibrate import kalman
 from ..calibrate.kalman_problem import NODE
-from ..calibrate.noise import MultipathEM
+from ..calibrate.noise import MultipathEM, fit_multipath_em
 from ..config import Config
 from .floats import BANDWIDTH, MissionFloat, referred
 from .schur import FloatBlock, outlying, solve_mission
@@ -43,10 +43,11 @@ from .schur import FloatBlock, outlying, solve_mission
 SOURCE_BLOCKS = ("offset_s", "drift_s_per_day", "slowness_s_per_m", "east_km", "north_km")
 ITERATIONS = 6
 GATE_S = 60.0  # an arrival's residual beyond this: weight 0 (`_refitted_noise`)
-# The arrivals' multipath refitted at each step to 0.01 in logit eps, log tau and the
-# log-likelihood (`noise.fit_multipath`'s tolerances): weights one Gauss-Newton step behind
-# need no more, and Nelder-Mead takes half the evaluations of the calibration's tolerances.
-MULTIPATH_TOLERANCE = (1e-2, 1e-2)
+# The arrivals' multipath refitted at each step by EM from the previous step's
+# (`noise.fit_multipath_em`, which reads the first entry: 0.003 in logit eps and log tau):
+# weights one Gauss-Newton step behind need no more, and a few EM steps from near the
+# maximum take a quarter of Nelder-Mead's time at its 0.01 (which stops as near).
+MULTIPATH_TOLERANCE = (3e-3, 1e-2)
 SIGMA_CAP = 3.0  # a float's TOA sd at most this many times the configured one
 # The most a Gauss-Newton step moves a source's unknown, per `SOURCE_BLOCKS` (None: free).
 STEP_LIMITS = (20.0, 0.02, None, 20.0, 20.0)
@@ -276,7 +277,7 @@ def fit_array(
     array_priors = ArrayPriors.of(layout, priors, s0, released)
     information = np.diag(1.0 / array_priors.sd() ** 2)
     columns = [layout.float_columns(f) for f in floats]
-    noise = [MultipathEM(config.model, MULTIPATH_TOLERANCE) for _ in floats]
+    noise = [MultipathEM(config.model, MULTIPATH_TOLERANCE, fit_multipath_em) for _ in floats]
     cap = SIGMA_CAP * config.model.toa_sigma_s
     for step in range(iterations + 1):
         last = step == iterations  # the covariance at the solution, no further move

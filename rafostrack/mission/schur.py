@@ -86,7 +86,9 @@ class FloatBlock:
     that linearised the float)."""
 
     own: BorderedBanded  # N_f
-    coupling: NDArray[np.float64]  # (n_f, m_f) C_f
+    # (n_f, m_f) C_f, sparse: a column is nonzero only at the nodes where its source is heard
+    # (about a fifth), and the block crosses between processes at every step
+    coupling: sparse.csr_matrix
     own_rhs: NDArray[np.float64]  # (n_f,) b_f
     terms: ReducedTerms  # its columns: where C_f's are in theta
 
@@ -98,9 +100,11 @@ class FloatBlock:
         unknowns, its other own unknowns up to n_own, then the array's), into the blocks."""
         normal = sparse.csr_matrix(normal)
         own = BorderedBanded(normal[:n_own, :n_own], n_band, bandwidth)
-        coupling = normal[:n_own, n_own:].toarray()
+        coupling = normal[:n_own, n_own:]
         corner = normal[n_own:, n_own:].toarray()
-        terms = reduced_terms(own, coupling, corner, rhs[:n_own], rhs[n_own:], np.asarray(columns, dtype=np.intp))
+        terms = reduced_terms(
+            own, coupling.toarray(), corner, rhs[:n_own], rhs[n_own:], np.asarray(columns, dtype=np.intp)
+        )
         return cls(own, coupling, rhs[:n_own], terms)
 
     def back_substituted(self, d_theta: NDArray) -> NDArray[np.float64]:
