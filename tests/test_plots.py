@@ -463,3 +463,41 @@ def test_time_axes_are_labelled_with_the_year(beacons, info, model, days, span):
             fig.canvas.draw()
             label = fig.axes[len(fig.axes) - 1 if draw is draw_uncertainty else 0].get_xlabel()
             assert label == f"time (UTC), {span}"
+
+
+def test_array_residuals_dates_once_per_column_under_its_lowest_panel(tmp_path, monkeypatch):
+    """array.png with 5 source panels on 4 columns: the date ticks and the time label (with
+    the months and years spanned) only under each column's lowest drawn panel, no offset
+    text (a year) on any panel, and none under the panel that has one below it."""
+    import rafostrack.plots.array_residuals as array_residuals
+
+    drawn = {}
+
+    def save(fig, path):  # what each drawn panel shows (the figure is cleared after)
+        fig.canvas.draw()
+        drawn["axes"] = [
+            {
+                "title": a.get_title(),
+                "ticks": [t.get_text() for t in a.get_xticklabels() if t.get_visible() and t.get_text()],
+                "offset": a.xaxis.get_offset_text().get_text(),
+                "label": a.get_xlabel(),
+            }
+            for a in fig.axes
+            if a.get_visible()
+        ]
+        return path
+
+    monkeypatch.setattr(array_residuals, "save_png", save)
+    time = np.datetime64("2010-03-01") + np.arange(0, 400, 10).astype("timedelta64[D]")
+    zeros = np.zeros(len(time))
+    panels = [
+        array_residuals.SourcePanel(f"S{k}", time, np.zeros(len(time), dtype=np.intp), zeros + k, zeros)
+        for k in range(5)
+    ]
+    array_residuals.plot_array_residuals(tmp_path / "array.png", panels, ["f1"])
+    axes = drawn["axes"]
+    assert [a["title"] for a in axes] == [f"S{k}" for k in range(5)]
+    assert [a["title"] for a in axes if a["ticks"]] == ["S1", "S2", "S3", "S4"]  # S0 has S4 below it
+    for a in axes:
+        assert a["offset"] == ""
+        assert a["label"] == ("time (UTC), Mar 2010 – Mar 2011" if a["ticks"] else "")
