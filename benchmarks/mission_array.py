@@ -21,12 +21,13 @@ contradicted that were right).
 
     python benchmarks/mission_array.py [--floats 24] [--days 240] [--seed 2026 ...]
                                        [--faults "KIND,... each"] [--jobs 2] [--out DIR]
-                                       [--no-alone] [--report docs/validation.md]
+                                       [--no-alone] [--report docs/validation.md] [--section NAME]
 
 `--faults each` runs every source fault kind alone (a mission each, the same floats),
 besides or instead of the set of several at once; `--no-alone` skips the faulted missions
-without the fit. `--report FILE` writes each run's summary into the `mission-array`
-section of that Markdown file (`benchmarks/report.py`).
+without the fit. `--report FILE` writes each run's summary into the section `--section`
+(`mission-array` by default; validation.md keeps the kinds alone in `mission-array-each`)
+of that Markdown file (`benchmarks/report.py`).
 """
 
 from __future__ import annotations
@@ -278,6 +279,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, help="keep the missions and outputs here")
     parser.add_argument("--no-alone", action="store_true", help="skip the faulted missions without the array fit")
     parser.add_argument("--report", type=Path, help="write the runs' summary into this Markdown file's section")
+    parser.add_argument(
+        "--section", default="mission-array", help="the report's section (e.g. mission-array-each for --faults each)"
+    )
     args = parser.parse_args()
     print(" ".join(sys.argv), flush=True)
     rows: list[dict] = []
@@ -291,7 +295,7 @@ def main() -> None:
             frame = pd.DataFrame(rows)
             frame = frame[[c for c in frame if c != "seconds"] + ["seconds"]]
             table = markdown_table(frame, {"median RMSE km": "{:.1f}".format})
-            write_section(args.report, "mission-array", f"{REPORT_HEAD}\n\n{table}")
+            write_section(args.report, args.section, f"{REPORT_HEAD}\n\n{table}")
 
 
 if __name__ == "__main__":
