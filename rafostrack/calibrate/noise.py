@@ -37,6 +37,8 @@ TOLERANCE = (1e-4, 1e-6)
 EPS_BOUNDS, TAU_BOUNDS_S = (1e-4, 0.3), (8.0, 200.0)
 EM_ITERATIONS = 200
 _LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
+# (residuals, sigma, the model with the previous fit's eps and tau, tolerance) -> (eps, tau)
+MultipathFit = Callable[[NDArray, float, ModelConfig, tuple[float, float]], tuple[float, float]]
 
 
 def fit_multipath(
@@ -116,9 +118,6 @@ def delay_posterior_mean_s(residual_s: NDArray, model: ModelConfig) -> NDArray[n
     if shape == 1:
         return sigma * (u + lam)
     return sigma * (u * u + 1.0 + u * lam) / (u + lam)
-
-
-MultipathFit = Callable[[NDArray, float, ModelConfig, tuple[float, float]], tuple[float, float]]
 
 
 def direct_probability(residual_s: NDArray, model: ModelConfig) -> NDArray[np.float64]:
