@@ -35,6 +35,7 @@ from ..model.measurement import horizon_s, toa_logpdf
 # Nelder-Mead's tolerances (xatol in logit eps and log tau, fatol in log-likelihood).
 TOLERANCE = (1e-4, 1e-6)
 EPS_BOUNDS, TAU_BOUNDS_S = (1e-4, 0.3), (8.0, 200.0)
+RESIDUAL_CLIP_S = 300.0
 EM_ITERATIONS = 200
 _LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
 # (residuals, sigma, the model with the previous fit's eps and tau, tolerance) -> (eps, tau)
@@ -48,7 +49,7 @@ def fit_multipath(
     of the timing fit: sigma itself comes from the Kalman smoother's marginal likelihood);
     eps in [1e-4, 0.3], tau in [8, 200] s (a delay shorter than a few sigma would be
     indistinguishable from the Gaussian core, and take part of it), to `tolerance`."""
-    r = np.clip(np.asarray(residual_s, dtype=float), -300.0, 300.0)
+    r = _clipped(residual_s)
 
     def unpack(p: NDArray) -> ModelConfig:
         return dataclasses.replace(
@@ -68,6 +69,12 @@ def fit_multipath(
     return fitted.multipath_fraction, fitted.multipath_delay_s
 
 
+def _clipped(residual_s: NDArray) -> NDArray[np.float64]:
+    """Residuals as both fits take them: within +-`RESIDUAL_CLIP_S` (an arrival further off
+    counts as one at that edge)."""
+    return np.clip(np.asarray(residual_s, dtype=float), -RESIDUAL_CLIP_S, RESIDUAL_CLIP_S)
+
+
 def _start_eps(model: ModelConfig) -> float:
     """Where a fit of eps starts: the model's, but in [0.02, 0.5] (from nearer 0 it would
     crawl: the delayed copy then explains almost no residual)."""
@@ -83,7 +90,7 @@ def fit_multipath_em(
     steps (|step| rho / (1 - rho), rho the ratio of the last two steps; from the third step
     on: the first, from a start far off, contracts faster than the rest), is within the
     `tolerance`'s first entry in logit eps and log tau."""
-    r = np.clip(np.asarray(residual_s, dtype=float), -300.0, 300.0)
+    r = _clipped(residual_s)
     current = dataclasses.replace(
         model,
         toa_sigma_s=toa_sigma_s,
