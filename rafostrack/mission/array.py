@@ -11,10 +11,10 @@ so, and not corrected.
 Each value is judged with its sd widened to the floats' spread where that is wider
 (`array_checks.widening`): the floats, not their arrivals, are the mission's independent
 units. A float that stands out among a source's floats (its left-out step an outlier among
-theirs, `array_fit.outlying_pairs`: its track or its labels of that source are off) would
-pull the source's estimate and alone set its spread, hiding what every other float agrees
-on; its arrivals of that source are set aside (weight 0) in the next fit, so that the
-estimate and its spread rest on the same floats. Not on a source with a contradicted value,
+theirs, every source's tested together: `array_fit.outlying_pairs`; its track or its labels
+of that source are off) would pull the source's estimate and alone set its spread, hiding
+what every other float agrees on; its arrivals of that source are set aside (weight 0) in
+the next fit, so that the estimate and its spread rest on the same floats. Not on a source with a contradicted value,
 until one of its values is released: a wrong value makes the floats that see it best differ
 the most (on a held-out mission, five floats' arrivals of a source 30 s off were set aside,
 and the fault went undecided for two rounds). Once one is released, the source's floats are

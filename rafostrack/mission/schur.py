@@ -46,7 +46,7 @@ from scipy.stats import f as f_dist
 
 from ..calibrate.banded import BorderedBanded, transposed_product
 
-OUTLIER_ALPHA = 0.01  # `outlying`: how often m equal Gaussian floats give an outlier
+OUTLIER_ALPHA = 0.01  # `outlying`'s default: how often m equal Gaussian floats give an outlier
 MIN_FLOATS_OUTLYING = 4
 
 
@@ -147,10 +147,12 @@ class ArraySolution:
         return (n - 1) / n * centred.T @ centred
 
 
-def outlying(steps: NDArray, touching: NDArray[np.int64]) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+def outlying(
+    steps: NDArray, touching: NDArray[np.int64], alpha: float = OUTLIER_ALPHA
+) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
     """Per column of `steps` (F, K), the float farthest from the others' mean, and whether it
     is an outlier among the m floats touching that unknown (`touching` (K,)): its squared
-    deviation d^2 beyond what m equal Gaussian floats give at `OUTLIER_ALPHA` over all m (a
+    deviation d^2 beyond what m equal Gaussian floats give at `alpha` over all m (a
     Grubbs test), d^2 / s^2 > m / (m - 1) F^-1(1 - alpha / m; 1, m - 2), s^2 the others' sum
     of squares over m - 2; never with fewer than four floats (`MIN_FLOATS_OUTLYING`)."""
     if len(steps) < 2:  # no others to compare with
@@ -160,9 +162,20 @@ def outlying(steps: NDArray, touching: NDArray[np.int64]) -> tuple[NDArray[np.in
     rest_mean = np.nanmean(rest, axis=0)
     largest = (steps[farthest, np.arange(steps.shape[1])] - rest_mean) ** 2
     m = np.maximum(touching, MIN_FLOATS_OUTLYING).astype(float)
-    threshold = m / (m - 1) * f_dist.ppf(1.0 - OUTLIER_ALPHA / m, 1, m - 2)
+    threshold = m / (m - 1) * f_dist.ppf(1.0 - alpha / m, 1, m - 2)
     spread = np.maximum(np.nansum((rest - rest_mean) ** 2, axis=0) / (m - 2), np.finfo(float).tiny)
     return farthest, (touching >= MIN_FLOATS_OUTLYING) & (largest > threshold * spread)
+
+
+def outlying_together(
+    steps: NDArray, touching: NDArray[np.int64], alpha: float = OUTLIER_ALPHA
+) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """`outlying` with every column tested at `alpha` over all the columns tested (those with
+    `MIN_FLOATS_OUTLYING` floats or more; Bonferroni: each at alpha over their number), so
+    that equal Gaussian floats give an outlier in any column on at most `alpha` of draws,
+    however many columns there are."""
+    tested = max(1, int(np.sum(touching >= MIN_FLOATS_OUTLYING)))
+    return outlying(steps, touching, alpha / tested)
 
 
 def array_system(
