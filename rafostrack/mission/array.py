@@ -11,16 +11,17 @@ so, and not corrected.
 Each value is judged with its sd widened to the floats' spread where that is wider
 (`array_checks.widening`): the floats, not their arrivals, are the mission's independent
 units. A float that stands out among a source's floats (its left-out step an outlier among
-theirs, every source's tested together: `array_fit.outlying_pairs`; its track or its labels
-of that source are off) would pull the source's estimate and alone set its spread, hiding
-what every other float agrees on; its arrivals of that source are set aside (weight 0) in
-the next fit, so that the estimate and its spread rest on the same floats. Not on a source with a contradicted value,
-until one of its values is released: a wrong value makes the floats that see it best differ
-the most (on a held-out mission, five floats' arrivals of a source 30 s off were set aside,
-and the fault went undecided for two rounds). Once one is released, the source's floats are
-tested: the others may be one float's pull (a float 40 s off on a source put its position
-46 km off). Each fit after the first releases a value, sets arrivals aside, or both; at most
-`MAX_RELEASES` releases, and `OUTLIER_PASSES` fits that only set arrivals aside.
+theirs, the source's unknowns tested together: `array_fit.outlying_pairs`; its track or its
+labels of that source are off) would pull the source's estimate and alone set its spread,
+hiding what every other float agrees on; its arrivals of that source are set aside (weight
+0) in the next fit, so that the estimate and its spread rest on the same floats. Not on a
+source with a contradicted value, until one of its values is released: a wrong value makes
+the floats that see it best differ the most (on a held-out mission, five floats' arrivals
+of a source 30 s off were set aside, and the fault went undecided for two rounds). Once one
+is released, the source's floats are tested: the others may be one float's pull (a float 40
+s off on a source put its position 46 km off). Each fit after the first releases a value,
+sets arrivals aside, or both; at most `MAX_RELEASES` releases, and `OUTLIER_PASSES` fits
+that only set arrivals aside.
 
 In a later round the floats were tracked with the values an earlier round decided: those
 start released (`released_in`). Their tracks and labels fit those values, not the table's;

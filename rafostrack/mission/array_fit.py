@@ -312,15 +312,16 @@ def outlying_pairs(
     left_out: NDArray, layout: ArrayLayout, floats: Sequence[MissionFloat], weight: Sequence[NDArray]
 ) -> list[tuple[int, int]]:
     """(float, source) positions where the float is an outlier among the floats weighing the
-    source's arrivals, in one of the source's offset, drift and position unknowns, all the
-    mission's tested together (`schur.outlying_together` on the left-out steps `left_out`
-    (F, M)): a mission of equal Gaussian floats has nothing set aside in 99 fits of 100,
-    whatever its number of sources."""
-    n = len(layout.sources)
-    weighing = np.zeros((len(floats), n), dtype=bool)  # float k weighs some arrival of source g
+    source's arrivals, in one of the source's offset, drift and position unknowns, tested
+    together (`schur.outlying_together` on the left-out steps `left_out` (F, M)): equal
+    Gaussian floats have a source's arrivals set aside in one fit of 100, whatever the
+    number of its unknowns tested."""
+    weighing = np.zeros((len(floats), len(layout.sources)), dtype=bool)  # float k weighs source g
     for k, (f, w) in enumerate(zip(floats, weight, strict=True)):
         weighing[k, layout.arrival_sources(f)[w > 0]] = True
-    source_of = np.repeat(np.arange(n), len(OUTLIER_BLOCKS))
-    columns = layout.column(np.tile(OUTLIER_BLOCKS, n), source_of)
-    farthest, found = outlying_together(left_out[:, columns], weighing.sum(axis=0).astype(np.int64)[source_of])
-    return sorted({(int(k), int(g)) for k, g in zip(farthest[found], source_of[found], strict=True)})
+    pairs = set()
+    for g, touching in enumerate(weighing.sum(axis=0)):
+        columns = layout.column(np.array(OUTLIER_BLOCKS), g)
+        farthest, found = outlying_together(left_out[:, columns], np.full(len(columns), touching))
+        pairs |= {(int(k), g) for k in farthest[found]}
+    return sorted(pairs)
