@@ -370,15 +370,14 @@ def test_a_mission_with_correct_tables_finds_nothing(mission):
     assert array.decided() == []
 
 
-@pytest.fixture(scope="module")
-def mission16():
-    return _mission(16, 90)
-
-
-def _one_float_off(beacons, simulated, shift_s: float):
-    """The faulted table (`_faulted`) and the mission's floats under it, the second float's
-    arrivals of B2 shifted a further `shift_s` (early: not multipath; as a float whose track
-    or labels are off gives)."""
+@pytest.mark.parametrize("shift_s", [-10.0, -40.0])
+def test_one_float_off_on_a_source_is_set_aside_and_the_fault_still_named(mission, shift_s):
+    """B2's offset 25 s off (`_faulted`), and one float's arrivals of B2 shifted further
+    (early: not multipath; as a float whose track or labels are off gives): its pull on B2
+    stands out among B2's floats, its B2 arrivals are set aside, and B2's offset is named
+    within 2 sd of the truth, as without the shift. (Without the setting aside it was
+    undetermined at 586-618 s, sd 30-57 s: that float alone set B2's spread.)"""
+    beacons, simulated = mission
     faulted = _faulted(beacons)
     floats = _floats(faulted, simulated)
     off = simulated[1]
@@ -386,39 +385,14 @@ def _one_float_off(beacons, simulated, shift_s: float):
     labels.loc[labels["beacon_id"] == "B2", "toa_s"] += shift_s
     floats[1] = mission_float(off.info.float_id, dataclasses.replace(truth_estimate(off), labels=labels),
                               faulted, off.info, CONFIG)  # fmt: skip
-    return faulted, floats, off.info.float_id
-
-
-@pytest.mark.parametrize("shift_s", [-10.0, -40.0])
-def test_one_float_off_on_a_source_is_set_aside_and_the_fault_still_named(mission16, shift_s):
-    """Sixteen floats, B2's offset 25 s off and one float's arrivals of B2 shifted further
-    (`_one_float_off`): its pull on B2 stands out among B2's floats, its B2 arrivals are set
-    aside, and B2's offset is named within 2 sd of the truth, as without the shift."""
-    beacons, simulated = mission16
-    faulted, floats, off = _one_float_off(beacons, simulated, shift_s)
     array = calibrated_array(floats, faulted, CONFIG)
-    assert f"{off} B2" in array.set_aside()
+    assert f"{off.info.float_id} B2" in array.set_aside()
     decided = next(v for v in array.decided() if (v.check.id, v.check.field) == ("B2", "offset_s"))
     offset = decided.check
     assert abs(offset.supported - beacons.offset_s[1]) < 2 * offset.sd
-    # array.csv's `floats`: those whose arrivals of B2 weigh in, the one set aside not among them.
-    assert decided.floats == sum(1 in f.heard for f in array.fit.floats) - 1
-
-
-@pytest.mark.parametrize("shift_s", [-10.0, -40.0])
-def test_one_float_off_among_few_makes_no_wrong_finding(mission, shift_s):
-    """Eight floats, the same faults (`_one_float_off`): B2's offset is named within 2 sd of
-    the truth or, where the shifted float does not stand out among B2's few floats (a Grubbs
-    test over so few has little power), left undetermined with the truth within 2 sd of its
-    estimate; no right value is contradicted."""
-    beacons, simulated = mission
-    faulted, floats, _ = _one_float_off(beacons, simulated, shift_s)
-    array = calibrated_array(floats, faulted, CONFIG)
-    offset = next(v.check for v in array.values if (v.check.id, v.check.field) == ("B2", "offset_s"))
-    assert offset.outcome in (CONTRADICTED, UNDETERMINED)
-    assert abs(offset.supported - beacons.offset_s[1]) < 2 * offset.sd
-    wrong = {"B2", "B5", "B7"}  # `_faulted`'s sources
-    assert not [v for v in array.values if v.check.outcome == CONTRADICTED and v.check.id not in wrong]
+    # array.csv's `floats`: those whose arrivals of B2 weigh in, those set aside not among them.
+    aside = sum(pair.endswith(" B2") for pair in array.set_aside())
+    assert decided.floats == sum(1 in f.heard for f in array.fit.floats) - aside
 
 
 def _with_path_biases(estimate, sd_s: float, rng: np.random.Generator):
