@@ -39,7 +39,7 @@ from ..calibrate.metadata_checks import (
 )
 from ..config import ChecksConfig
 from ..domain import BeaconTable
-from .array_fit import ArrayFit
+from .array_fit import ArrayFit, floats_weighing
 
 CLOCK = "clock_s"  # a source's clock over the mission (`clock_check`): not a table column
 TIMING = ("offset_s", "drift_s_per_day", CLOCK)
@@ -66,13 +66,10 @@ class ArrayValue:
 def support(fit: ArrayFit) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """(G,) per source the floats whose arrivals of it weigh in the fit (not those whose
     arrivals of it were all set aside or given weight 0) and the weight of their arrivals."""
-    n = len(fit.layout.sources)
-    floats, arrivals = np.zeros(n, dtype=np.int64), np.zeros(n)
+    arrivals = np.zeros(len(fit.layout.sources))
     for f, w in zip(fit.floats, fit.weight, strict=True):
-        where = fit.layout.arrival_sources(f)
-        floats[np.unique(where[w > 0])] += 1
-        np.add.at(arrivals, where, w)
-    return floats, arrivals
+        np.add.at(arrivals, fit.layout.arrival_sources(f), w)
+    return floats_weighing(fit.layout, fit.floats, fit.weight), arrivals
 
 
 def _block(fit: ArrayFit, source: int, blocks: tuple[int, ...], widen: bool) -> tuple[NDArray, NDArray] | None:

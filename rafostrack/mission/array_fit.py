@@ -308,6 +308,16 @@ def fit_array(
     )
 
 
+def floats_weighing(
+    layout: ArrayLayout, floats: Sequence[MissionFloat], weight: Sequence[NDArray]
+) -> NDArray[np.int64]:
+    """(G,) per source the floats that weigh some of its arrivals (weight > 0)."""
+    weighing = np.zeros((len(floats), len(layout.sources)), dtype=bool)
+    for k, (f, w) in enumerate(zip(floats, weight, strict=True)):
+        weighing[k, layout.arrival_sources(f)[w > 0]] = True
+    return weighing.sum(axis=0).astype(np.int64)
+
+
 def outlying_pairs(
     left_out: NDArray, layout: ArrayLayout, floats: Sequence[MissionFloat], weight: Sequence[NDArray]
 ) -> list[tuple[int, int]]:
@@ -316,11 +326,8 @@ def outlying_pairs(
     together (`schur.outlying_together` on the left-out steps `left_out` (F, M)): equal
     Gaussian floats have a source's arrivals set aside in one fit of 100, whatever the
     number of its unknowns tested."""
-    weighing = np.zeros((len(floats), len(layout.sources)), dtype=bool)  # float k weighs source g
-    for k, (f, w) in enumerate(zip(floats, weight, strict=True)):
-        weighing[k, layout.arrival_sources(f)[w > 0]] = True
     pairs = set()
-    for g, touching in enumerate(weighing.sum(axis=0)):
+    for g, touching in enumerate(floats_weighing(layout, floats, weight)):
         columns = layout.column(np.array(OUTLIER_BLOCKS), g)
         farthest, found = outlying_together(left_out[:, columns], np.full(len(columns), touching))
         pairs |= {(int(k), g) for k in farthest[found]}
